@@ -1,0 +1,52 @@
+# The two commands a fresh machine needs are `make demo` and `make test` (see README.md).
+# Everything runs from the project's own virtual environment, created on first use.
+VENV ?= .venv
+BIN := $(VENV)/bin
+PY := $(BIN)/python
+PRESET ?= traj_descending_sine
+
+.PHONY: setup demo test test-fast test-slow lint typecheck bench figures sample-bags colcon clean
+
+setup: $(VENV)/.installed
+
+$(VENV)/.installed: requirements.txt requirements-dev.txt scripts/setup_env.sh \
+		src/catheter_models/setup.py src/catheter_driver/setup.py src/catheter_control/setup.py
+	scripts/setup_env.sh $(VENV)
+
+## The main job: bring up the simulated rig as separate ROS 2 processes, follow a thesis
+## trajectory, print the tracking report, save the plot and the bag.
+demo: setup
+	$(BIN)/follow_trajectory --sim --preset $(PRESET)
+
+## All tests, the slow integration tests included (this is what .ci/run calls).
+test: setup
+	$(BIN)/pytest -m "slow or not slow"
+
+## Fast tests only (no DDS graph, no colcon build).
+test-fast: setup
+	$(BIN)/pytest -m "not slow"
+
+test-slow: setup
+	$(BIN)/pytest -m slow
+
+lint: setup
+	$(BIN)/ruff check src tests bench scripts
+	$(BIN)/ruff format --check src tests bench scripts
+
+typecheck: setup
+	$(BIN)/mypy
+
+bench: setup
+	$(PY) bench/bench_plant.py
+
+figures: setup
+	$(PY) scripts/plot_thesis_figures.py
+
+sample-bags: setup
+	$(PY) scripts/make_sample_bags.py
+
+colcon: setup
+	cd ros2_ws && ../$(BIN)/colcon build --symlink-install
+
+clean:
+	rm -rf ros2_ws/build ros2_ws/install ros2_ws/log

@@ -1,0 +1,34 @@
+"""ament_python packaging for catheter_control; also installs with plain pip."""
+
+from setuptools import find_packages, setup
+
+PACKAGE = "catheter_control"
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "tests"]),
+    package_data={PACKAGE: ["py.typed"]},
+    data_files=[
+        # The ament resource marker and package.xml are what `ros2 run` and
+        # ament_index_python look for; colcon installs them under share/.
+        ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
+        ("share/" + PACKAGE, ["package.xml"]),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=False,
+    maintainer="catheter maintainers",
+    maintainer_email="maintainers@users.noreply.example",
+    description="Control side of the PAM catheter: compensator, recorder, open-loop excitation, follow_trajectory and bring-up.",
+    license="Apache-2.0",
+    python_requires=">=3.10",
+    entry_points={
+        "console_scripts": [
+            'compensator = catheter_control.compensator_node:main',
+            'recorder = catheter_control.recorder_node:main',
+            'excite = catheter_control.excite_node:main',
+            'follow_trajectory = catheter_control.follow_trajectory:main',
+            'bringup = catheter_control.bringup:main',
+        ],
+    },
+)

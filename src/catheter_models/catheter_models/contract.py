@@ -1,0 +1,54 @@
+"""The interface contract (``docs/interfaces.md``) as constants.
+
+Nodes, the recorder and the bag loader all read topic names, types and the joint name from
+here, so a change to the contract is one edit and a reviewer sees it in one place.
+"""
+
+from __future__ import annotations
+
+from typing import Final, NamedTuple
+
+DEFAULT_NAMESPACE: Final = "/catheter"
+BEND_JOINT: Final = "bend"
+"""The one bending joint of the thesis's catheter. Multi-DOF catheters add names later."""
+
+SENSOR_RATE_HZ: Final = 250.0
+"""Laser (Baumer OADM) and pressure transmitter sampling rate of the thesis's rig."""
+CONTROL_RATE_HZ: Final = 250.0
+
+
+class TopicSpec(NamedTuple):
+    """One topic of the contract: its name relative to the namespace and its ROS type."""
+
+    name: str
+    msgtype: str
+
+
+PRESSURE_COMMAND: Final = TopicSpec("pressure/command", "sensor_msgs/msg/FluidPressure")
+PRESSURE_MEASURED: Final = TopicSpec("pressure/measured", "sensor_msgs/msg/FluidPressure")
+TIP_DISTANCE: Final = TopicSpec("tip/distance", "sensor_msgs/msg/Range")
+TIP_ANGLE: Final = TopicSpec("tip/angle", "sensor_msgs/msg/JointState")
+ANGLE_DESIRED: Final = TopicSpec("angle/desired", "sensor_msgs/msg/JointState")
+TRAJECTORY: Final = TopicSpec("trajectory", "trajectory_msgs/msg/JointTrajectory")
+DIAGNOSTICS: Final = TopicSpec("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")
+
+RECORDED_TOPICS: Final = (
+    PRESSURE_COMMAND,
+    PRESSURE_MEASURED,
+    TIP_DISTANCE,
+    TIP_ANGLE,
+    ANGLE_DESIRED,
+    TRAJECTORY,
+)
+"""What the recorder writes by default (diagnostics are not science data)."""
+
+REQUIRED_BAG_TOPICS: Final = (PRESSURE_COMMAND, PRESSURE_MEASURED, TIP_ANGLE)
+"""A bag holds at least these; tools that read a bag name anything missing and stop."""
+
+
+def qualify(topic: TopicSpec | str, namespace: str = DEFAULT_NAMESPACE) -> str:
+    """Full topic name: absolute names stay, relative ones go under ``namespace``."""
+    name = topic.name if isinstance(topic, TopicSpec) else topic
+    if name.startswith("/"):
+        return name
+    return f"{namespace.rstrip('/')}/{name}"
