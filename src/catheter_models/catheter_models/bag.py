@@ -1,0 +1,37 @@
+"""Bag I/O of the science core: record, build, load, repair and describe rosbag2 MCAP bags.
+
+One import for callers (the recorder node, the CLI, analysis scripts); each job lives in its own
+module:
+
+* ``bag_writer``   - ``BagRecorder`` (streaming recorder core), ``write_bag_from_arrays``
+* ``bag_reader``   - ``load_bag`` -> ``BagData`` -> ``AlignedSeries``
+* ``bag_repair``   - ``repair_bag`` for bags whose recorder was killed
+* ``bag_info``     - ``bag_info`` text summary
+* ``bag_metadata`` - ``metadata.yaml``, QoS profiles, bag layout on disk
+* ``bag_messages`` - contract messages <-> SI values
+* ``bag_scan``     - front-to-back MCAP reading up to a truncation
+"""
+
+from __future__ import annotations
+
+from catheter_models.bag_info import bag_info
+from catheter_models.bag_metadata import LATCHED_QOS, SENSOR_DATA_QOS, QosProfile
+from catheter_models.bag_reader import AlignedSeries, BagData, StampedSeries, load_bag
+from catheter_models.bag_repair import RepairReport, repair_bag
+from catheter_models.bag_writer import BagRecorder, SchemaText, write_bag_from_arrays
+
+__all__ = [
+    "LATCHED_QOS",
+    "SENSOR_DATA_QOS",
+    "AlignedSeries",
+    "BagData",
+    "BagRecorder",
+    "QosProfile",
+    "RepairReport",
+    "SchemaText",
+    "StampedSeries",
+    "bag_info",
+    "load_bag",
+    "repair_bag",
+    "write_bag_from_arrays",
+]

@@ -1,0 +1,111 @@
+"""A person-readable summary of a bag: topics, types, counts, rates, duration, custom_data.
+
+A truncated bag is summarised too (from the complete records), with the repair command, since
+that is exactly when someone runs ``catheter-lab bag info``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+
+from mcap.records import Channel, Message, Schema
+from rosbags.highlevel import AnyReader, AnyReaderError
+from rosbags.rosbag2 import ReaderError as Rosbag2ReaderError
+
+from catheter_models.bag_messages import kilted_typestore
+from catheter_models.bag_metadata import bag_custom_data, locate_bag
+from catheter_models.bag_scan import REPAIR_COMMAND, MessageSink, has_footer, scan_mcap
+from catheter_models.errors import BagError
+from catheter_models.units import NS_PER_S
+
+
+@dataclass
+class _TopicStats:
+    msgtype: str
+    count: int = 0
+    first_ns: int | None = None
+    last_ns: int | None = None
+
+    def add(self, log_time_ns: int) -> None:
+        self.count += 1
+        self.first_ns = log_time_ns if self.first_ns is None else min(self.first_ns, log_time_ns)
+        self.last_ns = log_time_ns if self.last_ns is None else max(self.last_ns, log_time_ns)
+
+    @property
+    def rate_hz(self) -> float | None:
+        """Mean message rate over the topic's own span [Hz]; None below two messages."""
+        if self.count < 2 or self.first_ns is None or self.last_ns is None:
+            return None
+        span_ns = self.last_ns - self.first_ns
+        return None if span_ns <= 0 else (self.count - 1) * NS_PER_S / span_ns
+
+
+def bag_info(path: Path | str) -> str:
+    """Summarise a bag directory or ``.mcap`` file as text.
+
+    Rates are mean receive (log-time) rates per topic [Hz]; the duration is from the first to
+    the last log time [s].
+
+    Raises:
+        BagError: The path is not a readable bag.
+    """
+    layout = locate_bag(path)
+    truncated = [f for f in layout.mcap_files if not has_footer(f)]
+    stats: dict[str, _TopicStats] = {}
+    header: list[str] = []
+    if truncated:
+        lost = 0
+        for mcap_file in layout.mcap_files:
+            scan = scan_mcap(mcap_file, on_message=_counter(stats))
+            for channel in scan.channels.values():
+                schema = scan.schemas.get(channel.schema_id)
+                stats.setdefault(channel.topic, _TopicStats(schema.name if schema else "?"))
+            lost += scan.bytes_discarded
+        header.append(
+            f"TRUNCATED: {', '.join(f.name for f in truncated)} has no MCAP footer "
+            f"(recorder killed?); {lost} bytes at the end are incomplete. Counts below are the "
+            f"recoverable messages. Repair with: {REPAIR_COMMAND} {layout.path}"
+        )
+    else:
+        try:
+            with AnyReader([layout.reader_path()], default_typestore=kilted_typestore()) as reader:
+                for conn in reader.connections:
+                    stats.setdefault(conn.topic, _TopicStats(conn.msgtype))
+                for conn, log_ns, _raw in reader.messages():
+                    stats[conn.topic].add(log_ns)
+        except (AnyReaderError, Rosbag2ReaderError) as exc:
+            msg = f"bag {layout.path} cannot be read as a rosbag2 bag: {exc}"
+            raise BagError(msg) from None
+    return "\n".join(header + _format(layout.path, stats, bag_custom_data(layout)))
+
+
+def _counter(stats: dict[str, _TopicStats]) -> MessageSink:
+    def count(channel: Channel, schema: Schema | None, message: Message) -> None:
+        entry = stats.setdefault(channel.topic, _TopicStats(schema.name if schema else "?"))
+        entry.add(message.log_time)
+
+    return count
+
+
+def _format(path: Path, stats: dict[str, _TopicStats], custom: dict[str, str]) -> list[str]:
+    firsts = [s.first_ns for s in stats.values() if s.first_ns is not None]
+    lasts = [s.last_ns for s in stats.values() if s.last_ns is not None]
+    total = sum(s.count for s in stats.values())
+    lines = [f"bag:       {path}", f"messages:  {total}"]
+    if firsts and lasts:
+        start = datetime.fromtimestamp(min(firsts) / NS_PER_S, tz=timezone.utc)
+        lines.append(f"start:     {start.isoformat(timespec='milliseconds')}")
+        lines.append(f"duration:  {(max(lasts) - min(firsts)) / NS_PER_S:.3f} s")
+    lines.append("topics:")
+    width = max((len(t) for t in stats), default=0)
+    type_width = max((len(s.msgtype) for s in stats.values()), default=0)
+    for topic, s in sorted(stats.items()):
+        rate = "-" if s.rate_hz is None else f"{s.rate_hz:.1f} Hz"
+        lines.append(
+            f"  {topic:<{width}}  {s.msgtype:<{type_width}}  {s.count:>8} msgs  {rate:>10}"
+        )
+    lines.append("custom_data:" if custom else "custom_data: (none)")
+    lines += [f"  {key}: {value}" for key, value in sorted(custom.items())]
+    return lines

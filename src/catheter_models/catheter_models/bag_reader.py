@@ -1,0 +1,494 @@
+"""Loading any bag that meets the interface contract into SI arrays.
+
+``load_bag`` reads with ``rosbags`` (``AnyReader``), so it reads bags from this stack, from
+``ros2 bag record`` on the rig, and from ``rosbags``' own writer alike. Messages are decoded with
+the definitions embedded in the bag (the Kilted store only when a bag embeds none).
+
+Times come from each message's ``header.stamp`` (the time the value was true), never from the
+receive time, and are given in seconds since the bag's start (its earliest log time).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Collection, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any, Final
+
+import numpy as np
+import numpy.typing as npt
+from rosbags.highlevel import AnyReader, AnyReaderError
+from rosbags.interfaces import Connection
+from rosbags.rosbag2 import ReaderError as Rosbag2ReaderError
+
+from catheter_models.bag_messages import (
+    distance_of,
+    gauge_pressure_of,
+    joint_position_of,
+    kilted_typestore,
+)
+from catheter_models.bag_metadata import BagLayout, bag_custom_data, locate_bag
+from catheter_models.bag_scan import has_footer, scan_mcap, truncated_bag_error
+from catheter_models.contract import (
+    ANGLE_DESIRED,
+    DEFAULT_NAMESPACE,
+    PRESSURE_COMMAND,
+    PRESSURE_MEASURED,
+    REQUIRED_BAG_TOPICS,
+    TIP_ANGLE,
+    TIP_DISTANCE,
+    TopicSpec,
+    qualify,
+)
+from catheter_models.errors import BagError, MissingTopicError, ParameterError
+from catheter_models.units import AMBIENT_PRESSURE_PA, NS_PER_S
+
+FloatArray = npt.NDArray[np.float64]
+
+SERIES_TOPICS: Final = (PRESSURE_COMMAND, PRESSURE_MEASURED, TIP_ANGLE, ANGLE_DESIRED, TIP_DISTANCE)
+"""The contract's stamped scalar streams that ``load_bag`` turns into series."""
+_BY_NAME: Final = {spec.name: spec for spec in SERIES_TOPICS}
+_UNITS: Final = {
+    PRESSURE_COMMAND.name: "Pa (gauge)",
+    PRESSURE_MEASURED.name: "Pa (gauge)",
+    TIP_ANGLE.name: "rad",
+    ANGLE_DESIRED.name: "rad",
+    TIP_DISTANCE.name: "m",
+}
+_HELD: Final = frozenset({PRESSURE_COMMAND.name, ANGLE_DESIRED.name})
+"""Set-points: each holds until the next, so they are resampled by zero-order hold."""
+
+
+def _frozen(values: npt.ArrayLike) -> FloatArray:
+    """A read-only float64 copy: series are shared, so nobody may edit them in place."""
+    arr = np.array(values, dtype=np.float64)
+    arr.flags.writeable = False
+    return arr
+
+
+@dataclass(frozen=True, eq=False)
+class StampedSeries:
+    """One topic's values against their header stamps.
+
+    Attributes:
+        name: The contract name, e.g. ``"pressure/command"``.
+        topic: The full topic name in the bag.
+        msgtype: Its ROS type.
+        t_s: Header stamps [s] since the bag start, sorted (read-only).
+        values: Values in SI (read-only); ``unit`` says which.
+        unit: ``"Pa (gauge)"``, ``"rad"`` or ``"m"``.
+        message_count: Messages on the topic, including the dropped ones.
+    """
+
+    name: str
+    topic: str
+    msgtype: str
+    t_s: FloatArray
+    values: FloatArray
+    unit: str
+    message_count: int
+
+    def __len__(self) -> int:
+        """Number of kept samples."""
+        return int(self.t_s.size)
+
+
+@dataclass(frozen=True, eq=False)
+class AlignedSeries:
+    """Signals resampled onto one time base.
+
+    Attributes:
+        t_s: Common time base [s] since the bag start.
+        pressure_command_pa: Valve set-point [Pa gauge], zero-order hold.
+        pressure_measured_pa: Line pressure [Pa gauge], linear interpolation.
+        angle_rad: Bending angle [rad], linear interpolation.
+        angle_desired_rad: Set-point angle [rad], zero-order hold; None if not in the bag.
+        distance_m: Laser distance [m], linear interpolation; None if not in the bag.
+    """
+
+    t_s: FloatArray
+    pressure_command_pa: FloatArray
+    pressure_measured_pa: FloatArray
+    angle_rad: FloatArray
+    angle_desired_rad: FloatArray | None
+    distance_m: FloatArray | None
+
+    def __len__(self) -> int:
+        """Number of samples."""
+        return int(self.t_s.size)
+
+
+@dataclass(frozen=True, eq=False)
+class BagData:
+    """A bag's science content, in SI units.
+
+    Attributes:
+        path: What was loaded (directory or ``.mcap`` file).
+        start_time_ns: The bag start [ns since the Unix epoch]; every ``t_s`` counts from here.
+        series: Loaded series by contract name (``"pressure/command"``, ``"tip/angle"``, ...).
+        custom_data: The experiment description from ``metadata.yaml``.
+        dropped: Samples left out because the value was NaN or infinite, by contract name.
+        out_of_range: ``Range`` readings left out because they lie outside the message's own
+            [min_range, max_range] (the message definition says to discard them), by name.
+        ambient_pa: Ambient pressure [Pa absolute] subtracted to get gauge pressure.
+    """
+
+    path: Path
+    start_time_ns: int
+    series: Mapping[str, StampedSeries]
+    custom_data: Mapping[str, str]
+    dropped: Mapping[str, int]
+    out_of_range: Mapping[str, int]
+    ambient_pa: float
+
+    @property
+    def pressure_command(self) -> StampedSeries:
+        """``pressure/command`` [Pa gauge]."""
+        return self._get(PRESSURE_COMMAND.name)
+
+    @property
+    def pressure_measured(self) -> StampedSeries:
+        """``pressure/measured`` [Pa gauge]."""
+        return self._get(PRESSURE_MEASURED.name)
+
+    @property
+    def tip_angle(self) -> StampedSeries:
+        """``tip/angle`` [rad]."""
+        return self._get(TIP_ANGLE.name)
+
+    @property
+    def angle_desired(self) -> StampedSeries | None:
+        """``angle/desired`` [rad], or None if the bag has no such topic."""
+        return self.series.get(ANGLE_DESIRED.name)
+
+    @property
+    def tip_distance(self) -> StampedSeries | None:
+        """``tip/distance`` [m], or None if the bag has no such topic."""
+        return self.series.get(TIP_DISTANCE.name)
+
+    def _get(self, name: str) -> StampedSeries:
+        try:
+            return self.series[name]
+        except KeyError:
+            msg = f"{name} was not loaded from {self.path}; loaded: {sorted(self.series)}"
+            raise BagError(msg) from None
+
+    def aligned(
+        self, rate_hz: float | None = None, reference: str = TIP_ANGLE.name
+    ) -> AlignedSeries:
+        """Resample the series onto one time base built from header stamps.
+
+        Set-points (``pressure/command``, ``angle/desired``) are held from one stamp to the
+        next (zero-order hold), as a valve or controller holds them. Measurements are
+        interpolated linearly. The time base covers only the span every included series
+        covers, so nothing is extrapolated. Optional series (``angle/desired``,
+        ``tip/distance``) are included when loaded and non-empty, and then bound that span too;
+        load without them (``topics=``) to drop them.
+
+        Args:
+            rate_hz: None: use the stamps of ``reference``. Otherwise a uniform grid at this
+                rate [Hz] starting at the first common stamp.
+            reference: Contract name of the series whose stamps are the time base.
+
+        Raises:
+            BagError: A required series is missing or empty, ``reference`` was not loaded, or
+                the series share no common time span.
+            ParameterError: ``rate_hz`` is not a positive finite rate.
+        """
+        command = self._nonempty(PRESSURE_COMMAND.name)
+        measured = self._nonempty(PRESSURE_MEASURED.name)
+        angle = self._nonempty(TIP_ANGLE.name)
+        desired = self._usable(ANGLE_DESIRED.name)
+        distance = self._usable(TIP_DISTANCE.name)
+        if reference not in self.series:
+            msg = f"reference {reference!r} was not loaded; choose one of {sorted(self.series)}"
+            raise BagError(msg)
+        used = [s for s in (command, measured, angle, desired, distance) if s is not None]
+        start_s = max(float(s.t_s[0]) for s in used)
+        end_s = min(float(s.t_s[-1]) for s in used)
+        if end_s < start_s:
+            spans = ", ".join(f"{s.topic} [{s.t_s[0]:.3f}, {s.t_s[-1]:.3f}] s" for s in used)
+            msg = f"the series of {self.path} share no common time span: {spans}"
+            raise BagError(msg)
+        if rate_hz is None:
+            ref_t = self._nonempty(reference).t_s
+            t_s = ref_t[(ref_t >= start_s) & (ref_t <= end_s)]
+        else:
+            if not (math.isfinite(rate_hz) and rate_hz > 0.0):
+                msg = f"rate_hz is {rate_hz}; expected a positive finite rate [Hz] or None"
+                raise ParameterError(msg)
+            # The small epsilon keeps the end sample when the span is a whole number of periods.
+            n = math.floor((end_s - start_s) * rate_hz + 1e-9) + 1
+            t_s = start_s + np.arange(n, dtype=np.float64) / rate_hz
+        return AlignedSeries(
+            t_s=_frozen(t_s),
+            pressure_command_pa=_frozen(_resample(command, t_s)),
+            pressure_measured_pa=_frozen(_resample(measured, t_s)),
+            angle_rad=_frozen(_resample(angle, t_s)),
+            angle_desired_rad=None if desired is None else _frozen(_resample(desired, t_s)),
+            distance_m=None if distance is None else _frozen(_resample(distance, t_s)),
+        )
+
+    def _nonempty(self, name: str) -> StampedSeries:
+        series = self._get(name)
+        if len(series) == 0:
+            msg = (
+                f"{series.topic} has no usable samples in {self.path} "
+                f"({series.message_count} messages, {self.dropped.get(name, 0)} non-finite, "
+                f"{self.out_of_range.get(name, 0)} out of range)"
+            )
+            raise BagError(msg)
+        return series
+
+    def _usable(self, name: str) -> StampedSeries | None:
+        """An optional series if loaded and not empty (its drop counts say why if empty)."""
+        series = self.series.get(name)
+        return series if series is not None and len(series) > 0 else None
+
+
+def _resample(series: StampedSeries, t_s: FloatArray) -> FloatArray:
+    if series.name in _HELD:
+        return _hold(series, t_s)
+    return np.asarray(np.interp(t_s, series.t_s, series.values), dtype=np.float64)
+
+
+def _hold(series: StampedSeries, t_s: FloatArray) -> FloatArray:
+    """Zero-order hold: the last value stamped at or before each time."""
+    index = np.searchsorted(series.t_s, t_s, side="right") - 1
+    return np.asarray(series.values[np.clip(index, 0, None)], dtype=np.float64)
+
+
+# -- loading ----------------------------------------------------------------------------------
+
+
+def load_bag(
+    path: Path | str,
+    namespace: str = DEFAULT_NAMESPACE,
+    ambient_pa: float = AMBIENT_PRESSURE_PA,
+    topics: Collection[str] | None = None,
+) -> BagData:
+    """Load a bag that meets the interface contract.
+
+    Topics are found under ``namespace`` first; failing that, by their contract name as a
+    suffix in any namespace (a bag recorded at the root or under another namespace), as long
+    as exactly one topic matches.
+
+    Args:
+        path: A rosbag2 directory, or one ``.mcap`` file.
+        namespace: Namespace the contract's relative topics were published in.
+        ambient_pa: Ambient pressure [Pa absolute] to subtract from ``FluidPressure``.
+        topics: Contract names to load (e.g. ``["pressure/command", "tip/angle"]``); each must
+            be present. None: the required topics, plus ``tip/distance`` and
+            ``angle/desired`` when present.
+
+    Returns:
+        The series in SI units, with the bag's ``custom_data`` and counts of dropped samples.
+
+    Raises:
+        TruncatedBagError: An MCAP file has no footer (killed recorder); says how to repair.
+        MissingTopicError: A required (or requested) topic is absent or has no messages;
+            names it (and lists the bag's topics).
+        BagError: A topic is ambiguous or has the wrong type, a ``JointState`` lacks the
+            ``bend`` joint, messages are unstamped, or the bag cannot be read.
+        ParameterError: ``topics`` names something that is not a contract stream.
+    """
+    layout = locate_bag(path)
+    _refuse_truncated(layout)
+    wanted = _wanted(topics)
+    must_have = _must_have(wanted, topics is None)
+    try:
+        with AnyReader([layout.reader_path()], default_typestore=kilted_typestore()) as reader:
+            available = _available_topics(reader.connections)
+            resolved = _resolve_all(layout.path, wanted, available, namespace, must_have)
+            start_ns = int(reader.start_time)
+            collected = _collect(reader, resolved, ambient_pa)
+    except (AnyReaderError, Rosbag2ReaderError) as exc:
+        msg = f"bag {layout.path} cannot be read as a rosbag2 bag: {exc}"
+        raise BagError(msg) from None
+
+    empty = [acc.topic for acc in collected.values() if acc.name in must_have and not acc.values]
+    if empty:
+        msg = (
+            f"bag {layout.path} has required topic(s) {', '.join(empty)} but no messages on "
+            "them; a bag holds data on every required topic"
+        )
+        raise MissingTopicError(msg)
+    series: dict[str, StampedSeries] = {}
+    dropped: dict[str, int] = {}
+    out_of_range: dict[str, int] = {}
+    for name, acc in collected.items():
+        series[name], dropped[name], out_of_range[name] = acc.finish(start_ns)
+    return BagData(
+        path=layout.path,
+        start_time_ns=start_ns,
+        series=MappingProxyType(series),
+        custom_data=MappingProxyType(bag_custom_data(layout)),
+        dropped=MappingProxyType(dropped),
+        out_of_range=MappingProxyType(out_of_range),
+        ambient_pa=float(ambient_pa),
+    )
+
+
+def _refuse_truncated(layout: BagLayout) -> None:
+    incomplete = [f for f in layout.mcap_files if not has_footer(f)]
+    if incomplete:
+        raise truncated_bag_error(layout.path, [scan_mcap(f) for f in layout.mcap_files])
+
+
+def _wanted(topics: Collection[str] | None) -> list[TopicSpec]:
+    if topics is None:
+        return list(SERIES_TOPICS)
+    if isinstance(topics, str):
+        topics = [topics]
+    unknown = [t for t in topics if t not in _BY_NAME]
+    if unknown:
+        msg = f"cannot load {unknown}: load_bag reads the contract streams {sorted(_BY_NAME)}"
+        raise ParameterError(msg)
+    return [_BY_NAME[t] for t in topics]
+
+
+def _available_topics(connections: list[Connection]) -> dict[str, set[str]]:
+    available: dict[str, set[str]] = {}
+    for conn in connections:
+        available.setdefault(conn.topic, set()).add(conn.msgtype)
+    return available
+
+
+def _describe(available: Mapping[str, set[str]]) -> str:
+    return ", ".join(f"{t} ({'/'.join(sorted(ty))})" for t, ty in sorted(available.items()))
+
+
+def _resolve(
+    bag: Path, spec: TopicSpec, available: Mapping[str, set[str]], namespace: str
+) -> str | None:
+    """The bag's topic for ``spec``: under ``namespace``, else the one topic ending in it."""
+    exact = qualify(spec, namespace)
+    if exact in available:
+        return exact
+    suffix = "/" + spec.name.lstrip("/")
+    matches = sorted(t for t in available if t == suffix or t.endswith(suffix))
+    if len(matches) > 1:
+        msg = (
+            f"bag {bag}: {spec.name!r} is ambiguous: {' and '.join(matches)} both match and "
+            f"neither is {exact}; pass namespace= to choose"
+        )
+        raise BagError(msg)
+    return matches[0] if matches else None
+
+
+def _must_have(wanted: list[TopicSpec], defaults: bool) -> frozenset[str]:
+    """The contract's required topics by default; everything asked for when named."""
+    if defaults:
+        return frozenset(s.name for s in REQUIRED_BAG_TOPICS)
+    return frozenset(s.name for s in wanted)
+
+
+def _resolve_all(
+    bag: Path,
+    wanted: list[TopicSpec],
+    available: Mapping[str, set[str]],
+    namespace: str,
+    must_have: frozenset[str],
+) -> dict[str, str]:
+    resolved: dict[str, str] = {}
+    missing: list[str] = []
+    for spec in wanted:
+        topic = _resolve(bag, spec, available, namespace)
+        if topic is None:
+            if spec.name in must_have:
+                missing.append(qualify(spec, namespace))
+            continue
+        found = available[topic]
+        if found != {spec.msgtype}:
+            msg = (
+                f"bag {bag}: topic {topic} has type {' and '.join(sorted(found))}; "
+                f"the contract expects {spec.msgtype}"
+            )
+            raise BagError(msg)
+        resolved[spec.name] = topic
+    if missing:
+        msg = (
+            f"bag {bag} lacks required topic(s) {', '.join(missing)} (searched the namespace "
+            f"{namespace!r}, then any namespace). The bag has: {_describe(available) or 'none'}"
+        )
+        raise MissingTopicError(msg)
+    return resolved
+
+
+class _Accumulator:
+    """Collects one topic's decoded samples, then makes a sorted, frozen series."""
+
+    def __init__(self, name: str, topic: str, msgtype: str) -> None:
+        self.name = name
+        self.topic = topic
+        self.msgtype = msgtype
+        self.stamps_ns: list[int] = []
+        self.values: list[float] = []
+        self.in_range: list[bool] = []
+        self.unstamped = 0
+
+    def add(self, stamp_ns: int, value: float, in_range: bool = True) -> None:
+        if stamp_ns == 0:
+            self.unstamped += 1
+        self.stamps_ns.append(stamp_ns)
+        self.values.append(value)
+        self.in_range.append(in_range)
+
+    def finish(self, start_ns: int) -> tuple[StampedSeries, int, int]:
+        if self.unstamped:
+            msg = (
+                f"{self.unstamped} of {len(self.stamps_ns)} messages on {self.topic} have "
+                "header.stamp = 0 (unstamped); the contract requires the time the value was "
+                "true, so they cannot be aligned"
+            )
+            raise BagError(msg)
+        stamps = np.asarray(self.stamps_ns, dtype=np.int64)
+        values = np.asarray(self.values, dtype=np.float64)
+        finite = np.isfinite(values)
+        in_range = np.asarray(self.in_range, dtype=bool)
+        keep = finite & in_range
+        # Stable sort: header stamps may arrive out of order (several publishers, network).
+        order = np.argsort(stamps[keep], kind="stable")
+        t_s = (stamps[keep][order] - start_ns).astype(np.float64) / NS_PER_S
+        series = StampedSeries(
+            name=self.name,
+            topic=self.topic,
+            msgtype=self.msgtype,
+            t_s=_frozen(t_s),
+            values=_frozen(values[keep][order]),
+            unit=_UNITS[self.name],
+            message_count=len(self.stamps_ns),
+        )
+        return series, int(np.count_nonzero(~finite)), int(np.count_nonzero(finite & ~in_range))
+
+
+def _decode(name: str, msg: Any, topic: str, ambient_pa: float) -> tuple[int, float, bool]:
+    """(header stamp [ns], SI value, in valid range) of one decoded message."""
+    if name in (PRESSURE_COMMAND.name, PRESSURE_MEASURED.name):
+        stamp_ns, value = gauge_pressure_of(msg, ambient_pa)
+        return stamp_ns, value, True
+    if name in (TIP_ANGLE.name, ANGLE_DESIRED.name):
+        stamp_ns, value = joint_position_of(msg, topic=topic)
+        return stamp_ns, value, True
+    stamp_ns, value, in_range = distance_of(msg)
+    return stamp_ns, value, in_range
+
+
+def _collect(
+    reader: AnyReader, resolved: Mapping[str, str], ambient_pa: float
+) -> dict[str, _Accumulator]:
+    by_topic = {topic: name for name, topic in resolved.items()}
+    accs = {
+        name: _Accumulator(name, topic, _BY_NAME[name].msgtype) for name, topic in resolved.items()
+    }
+    connections = [c for c in reader.connections if c.topic in by_topic]
+    # An empty connection list would mean "all topics" to rosbags.
+    if not connections:
+        return accs
+    for conn, _log_ns, raw in reader.messages(connections=connections):
+        name = by_topic[conn.topic]
+        msg = reader.deserialize(raw, conn.msgtype)
+        accs[name].add(*_decode(name, msg, conn.topic, ambient_pa))
+    return accs
