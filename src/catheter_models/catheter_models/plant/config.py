@@ -69,12 +69,23 @@ EFFECTS: Final[Mapping[str, EffectSpec]] = {
         EffectSpec(
             "play",
             "Coulomb friction between steer wire and Nitinol tube, as a Dahl friction state "
-            "(smooth pre-sliding, then sliding at the Coulomb level)",
+            "(smooth pre-sliding, then sliding at the Coulomb level); the level scales with "
+            "the wire's tension (capstan), so a vented muscle lets the tip come home",
             (
-                ParamSpec("friction_rad", 1.5 * _DEG, 0.0, 10 * _DEG,
-                          "Coulomb friction torque as equivalent bend: half the loop width [rad]"),
-                ParamSpec("presliding_rad", 0.6 * _DEG, 0.05 * _DEG, 5 * _DEG,
-                          "bend over which friction builds up after a reversal [rad]"),
+                ParamSpec(
+                    "friction_rad",
+                    1.5 * _DEG,
+                    0.0,
+                    10 * _DEG,
+                    "Coulomb friction as equivalent bend at the pull of 1 bar effective pressure [rad]",
+                ),
+                ParamSpec(
+                    "presliding_rad",
+                    0.6 * _DEG,
+                    0.05 * _DEG,
+                    5 * _DEG,
+                    "bend over which friction builds up after a reversal [rad]",
+                ),
             ),
             True,
         ),
@@ -82,8 +93,13 @@ EFFECTS: Final[Mapping[str, EffectSpec]] = {
             "rate_dependence",
             "viscous friction of the wire in the tube: torque proportional to bend rate",
             (
-                ParamSpec("viscous_s", 0.005, 0.0, 0.2,
-                          "viscous torque as equivalent bend per bend rate [rad/(rad/s)] = [s]"),
+                ParamSpec(
+                    "viscous_s",
+                    0.005,
+                    0.0,
+                    0.2,
+                    "viscous torque as equivalent bend per bend rate [rad/(rad/s)] = [s]",
+                ),
             ),
             True,
         ),
@@ -92,10 +108,20 @@ EFFECTS: Final[Mapping[str, EffectSpec]] = {
             "balloon and braid preload: the muscle makes no force until the balloon meets the "
             "braid at the opening pressure; contact grows over a knee",
             (
-                ParamSpec("opening_pressure_pa", 0.85e5, 0.0, 2.0e5,
-                          "gauge pressure at which the muscle starts to pull [Pa]"),
-                ParamSpec("knee_pa", 0.1e5, 1.0e2, 1.0e5,
-                          "pressure span over which balloon-braid contact becomes full [Pa]"),
+                ParamSpec(
+                    "opening_pressure_pa",
+                    0.85e5,
+                    0.0,
+                    2.0e5,
+                    "gauge pressure at which the muscle starts to pull [Pa]",
+                ),
+                ParamSpec(
+                    "knee_pa",
+                    0.1e5,
+                    1.0e2,
+                    1.0e5,
+                    "pressure span over which balloon-braid contact becomes full [Pa]",
+                ),
             ),
             True,
         ),
@@ -104,8 +130,13 @@ EFFECTS: Final[Mapping[str, EffectSpec]] = {
             "braid friction whose normal force grows with pressure: the muscle's force gain is "
             "lower while inflating than while deflating",
             (
-                ParamSpec("ratio", 0.08, 0.0, 0.5,
-                          "relative gain difference; loading gain 1-ratio, unloading 1+ratio [1]"),
+                ParamSpec(
+                    "ratio",
+                    0.08,
+                    0.0,
+                    0.5,
+                    "relative gain difference; loading gain 1-ratio, unloading 1+ratio [1]",
+                ),
             ),
             True,
         ),
@@ -113,8 +144,13 @@ EFFECTS: Final[Mapping[str, EffectSpec]] = {
             "saturation",
             "the bend stiffens towards its mechanical limit (elastic torque ~ artanh)",
             (
-                ParamSpec("limit_rad", 55 * _DEG, 20 * _DEG, 67 * _DEG,
-                          "mechanical bend limit the stiffness diverges at [rad]"),
+                ParamSpec(
+                    "limit_rad",
+                    55 * _DEG,
+                    20 * _DEG,
+                    67 * _DEG,
+                    "mechanical bend limit the stiffness diverges at [rad]",
+                ),
             ),
             True,
         ),
@@ -124,8 +160,13 @@ EFFECTS: Final[Mapping[str, EffectSpec]] = {
             "dP/dt = G (P_valve^2 - P_muscle^2), absolute pressures, so the lag is shorter at "
             "high pressure and filling differs from venting",
             (
-                ParamSpec("time_constant_s", 0.06, 0.005, 0.5,
-                          "small-signal time constant at 1.5 bar gauge [s]"),
+                ParamSpec(
+                    "time_constant_s",
+                    0.06,
+                    0.005,
+                    0.5,
+                    "small-signal time constant at 1.5 bar gauge [s]",
+                ),
             ),
             False,
         ),
@@ -140,10 +181,20 @@ EFFECTS: Final[Mapping[str, EffectSpec]] = {
             "viscoelastic relaxation of polymer and Nitinol: two Maxwell branches (Zener solid) "
             "with time constants tau/2 and 2 tau",
             (
-                ParamSpec("fraction", 0.1, 0.0, 0.3,
-                          "share of the final bend that arrives by creep after a step [1]"),
-                ParamSpec("time_constant_s", 2.0, 0.2, 20.0,
-                          "geometric mean of the two relaxation times [s]"),
+                ParamSpec(
+                    "fraction",
+                    0.1,
+                    0.0,
+                    0.3,
+                    "share of the final bend that arrives by creep after a step [1]",
+                ),
+                ParamSpec(
+                    "time_constant_s",
+                    2.0,
+                    0.2,
+                    20.0,
+                    "geometric mean of the two relaxation times [s]",
+                ),
             ),
             False,
         ),
@@ -151,7 +202,9 @@ EFFECTS: Final[Mapping[str, EffectSpec]] = {
             "tip_dynamics",
             "tip inertia against bending stiffness: a lightly damped second-order bend",
             (
-                ParamSpec("natural_frequency_hz", 8.0, 2.0, 30.0, "undamped natural frequency [Hz]"),
+                ParamSpec(
+                    "natural_frequency_hz", 8.0, 2.0, 30.0, "undamped natural frequency [Hz]"
+                ),
                 ParamSpec("damping_ratio", 0.15, 0.02, 1.0, "damping ratio [1]"),
             ),
             False,
@@ -161,8 +214,13 @@ EFFECTS: Final[Mapping[str, EffectSpec]] = {
             "thermal drift of the laser mount: the distance offset approaches its new value "
             "exponentially (10 min), seen through the nonlinear eq. 3.3",
             (
-                ParamSpec("rate_rad_per_s", 1.0 * _DEG / 60.0, -10 * _DEG / 60, 10 * _DEG / 60,
-                          "initial drift rate of the measured straight-tip angle [rad/s]"),
+                ParamSpec(
+                    "rate_rad_per_s",
+                    1.0 * _DEG / 60.0,
+                    -10 * _DEG / 60,
+                    10 * _DEG / 60,
+                    "initial drift rate of the measured straight-tip angle [rad/s]",
+                ),
             ),
             False,
         ),
@@ -171,16 +229,41 @@ EFFECTS: Final[Mapping[str, EffectSpec]] = {
 """The effect catalogue of docs/effects.md, as the plant's physics implements it."""
 
 RIG_PARAMS: Final[tuple[ParamSpec, ...]] = (
-    ParamSpec("valve_time_constant_s", 0.005, 0.001, 0.1,
-              "proportional regulator's first-order response [s]"),
-    ParamSpec("valve_max_pressure_pa", 3.0e5, 0.5e5, 10.0e5,
-              "highest gauge pressure the valve can deliver; commands are clipped to it [Pa]"),
-    ParamSpec("bend_gain_rad_per_pa", 18 * _DEG / 1e5, 1 * _DEG / 1e5, 60 * _DEG / 1e5,
-              "bend per effective muscle pressure, small-bend stiffness [rad/Pa]"),
-    ParamSpec("mech_time_constant_s", 0.003, 0.0005, 0.05,
-              "structural damping over stiffness of the massless bend [s]"),
-    ParamSpec("straight_distance_m", 0.065, 0.035, 0.0699,
-              "laser distance to the tip marker with the tip straight [m]"),
+    ParamSpec(
+        "valve_time_constant_s",
+        0.005,
+        0.001,
+        0.1,
+        "proportional regulator's first-order response [s]",
+    ),
+    ParamSpec(
+        "valve_max_pressure_pa",
+        3.0e5,
+        0.5e5,
+        10.0e5,
+        "highest gauge pressure the valve can deliver; commands are clipped to it [Pa]",
+    ),
+    ParamSpec(
+        "bend_gain_rad_per_pa",
+        18 * _DEG / 1e5,
+        1 * _DEG / 1e5,
+        60 * _DEG / 1e5,
+        "bend per effective muscle pressure, small-bend stiffness [rad/Pa]",
+    ),
+    ParamSpec(
+        "mech_time_constant_s",
+        0.003,
+        0.0005,
+        0.05,
+        "structural damping over stiffness of the massless bend [s]",
+    ),
+    ParamSpec(
+        "straight_distance_m",
+        0.065,
+        0.035,
+        0.0699,
+        "laser distance to the tip marker with the tip straight [m]",
+    ),
     ParamSpec("laser_noise_m", 0.02e-3, 0.0, 1e-3, "laser distance noise, std [m]"),
     ParamSpec("pressure_noise_pa", 300.0, 0.0, 1e4, "pressure transmitter noise, std [Pa]"),
     ParamSpec("ambient_pressure_pa", AMBIENT_PRESSURE_PA, 5.0e4, 1.2e5, "ambient pressure [Pa]"),
@@ -217,7 +300,9 @@ class PlantConfig:
     and :meth:`with_rig`, which validate every value against its range.
     """
 
-    rig: Mapping[str, float] = field(default_factory=lambda: {p.name: p.default for p in RIG_PARAMS})
+    rig: Mapping[str, float] = field(
+        default_factory=lambda: {p.name: p.default for p in RIG_PARAMS}
+    )
     effects: Mapping[str, EffectSetting] = field(
         default_factory=lambda: _default_settings(thesis_rig=True)
     )
@@ -308,7 +393,8 @@ class PlantConfig:
                 config = config.with_effect(effect, enabled=bool(value))
             else:
                 config = config.with_effect(
-                    effect, enabled=config.enabled(effect) if effect in EFFECTS else True,
+                    effect,
+                    enabled=config.enabled(effect) if effect in EFFECTS else True,
                     **{pname: float(value)},
                 )
         return config.with_rig(**rig) if rig else config

@@ -14,6 +14,9 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
+_REFERENCE_PULL_PA = 1.0e5
+"""play.friction_rad is the Coulomb level at the pull of this effective muscle pressure."""
+
 # --- parameter vector layout -------------------------------------------------------------
 P_DT_S = 0
 P_SUBSTEPS = 1
@@ -187,9 +190,14 @@ def run_kernel(
                 angle = angle_max
                 rate = min(rate, 0.0)
             if fc > 0.0:
+                # Capstan: the wire presses on the tube in proportion to its tension, so the
+                # Coulomb level follows the pull (in bend units, relative to the pull of one
+                # bar). With the muscle vented there is no friction and the tip comes home.
+                level = fc * max(drive, 0.0) / (gain * _REFERENCE_PULL_PA)
                 sgn_v = 1.0 if rate > 0.0 else (-1.0 if rate < 0.0 else 0.0)
-                fric += dt * sigma * (1.0 - fric / fc * sgn_v) * rate
-                fric = min(max(fric, -fc), fc)
+                if level > 0.0:
+                    fric += dt * sigma * (1.0 - fric / level * sgn_v) * rate
+                fric = min(max(fric, -level), level)
             if k_creep != 0.0:
                 c1 += dt / tau1 * (angle - c1)
                 c2 += dt / tau2 * (angle - c2)

@@ -146,7 +146,9 @@ class Plant:
             tau = c.effect_param("pneumatic_lag", "time_constant_s")
             p[k.P_LAG_ON] = 1.0
             # Small-signal: d(dP)/dt = -2 G P dP, so tau(P) = 1 / (2 G P) at absolute P.
-            p[k.P_LAG_G] = 1.0 / (2.0 * tau * (rig["ambient_pressure_pa"] + _LAG_REFERENCE_GAUGE_PA))
+            p[k.P_LAG_G] = 1.0 / (
+                2.0 * tau * (rig["ambient_pressure_pa"] + _LAG_REFERENCE_GAUGE_PA)
+            )
         if c.enabled("transport_delay"):
             p[k.P_DELAY_SUBSTEPS] = round(c.effect_param("transport_delay", "delay_s") / dt)
         if c.enabled("deadband"):
