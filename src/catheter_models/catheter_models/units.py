@@ -72,7 +72,7 @@ NS_PER_S = 1_000_000_000
 
 def s_to_ns(time_s: float) -> int:
     """Seconds to integer nanoseconds (bag and message stamps)."""
-    return int(round(time_s * NS_PER_S))
+    return round(time_s * NS_PER_S)
 
 
 def ns_to_s(time_ns: int) -> float:

@@ -77,7 +77,8 @@ EFFECTS: Final[Mapping[str, EffectSpec]] = {
                     1.5 * _DEG,
                     0.0,
                     10 * _DEG,
-                    "Coulomb friction as equivalent bend at the pull of 1 bar effective pressure [rad]",
+                    "Coulomb friction as equivalent bend at the pull of 1 bar effective pressure "
+                    "[rad]",
                 ),
                 ParamSpec(
                     "presliding_rad",
@@ -309,6 +310,17 @@ class PlantConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
+        # A partial mapping (say, only "play") means "defaults for the rest": fill them in so
+        # the plant never meets a missing key. The dataclass is frozen, hence __setattr__.
+        rig = {p.name: p.default for p in RIG_PARAMS} | dict(self.rig)
+        effects = _default_settings(thesis_rig=False) | dict(self.effects)
+        for name in list(effects):
+            if name in EFFECTS:
+                defaults = {p.name: p.default for p in EFFECTS[name].params}
+                setting = effects[name]
+                effects[name] = EffectSetting(setting.enabled, defaults | dict(setting.params))
+        object.__setattr__(self, "rig", rig)
+        object.__setattr__(self, "effects", effects)
         for name, value in self.rig.items():
             if name not in _RIG_SPECS:
                 raise ParameterError(

@@ -1,6 +1,8 @@
-"""The simulated rig: batch (a whole signal, as fast as possible) and streaming (one sample at a
-time, for the simulated hardware node). Both call the same numba kernel with the same state, so
-a streamed run and a batch run from the same seed give the same samples, bit for bit.
+"""The simulated rig: batch (a whole signal, as fast as possible) and streaming (one sample).
+
+The streaming path serves the simulated hardware node. Both call the same numba kernel with
+the same state, so a streamed run and a batch run from the same seed give the same samples,
+bit for bit.
 """
 
 from __future__ import annotations
@@ -36,7 +38,8 @@ class PlantOutput:
 
     Attributes:
         t_s: sample times from the start of the run [s].
-        pressure_command_pa: valve set-point as applied (finite), gauge [Pa].
+        pressure_command_pa: valve set-point as commanded (finite; the valve clips it to
+            ``valve_max_pressure_pa``), gauge [Pa].
         pressure_measured_pa: transmitter reading at the valve outlet, gauge [Pa].
         distance_m: laser distance to the tip marker [m].
         angle_rad: bend from eqs. 3.1-3.3 on the laser reading [rad].
@@ -122,11 +125,11 @@ class Plant:
         substeps = max(1, math.ceil(self.sample_period_s / _substep_s(self.config)))
         self.substeps_per_sample = substeps
         self._params = self._build_params(substeps)
-        n_ring = int(math.ceil(_MAX_DELAY_S / self._params[k.P_DT_S])) + 2
+        n_ring = math.ceil(_MAX_DELAY_S / self._params[k.P_DT_S]) + 2
         self._ring = np.zeros(n_ring)
         self._state = np.zeros(k.N_STATE)
         self._rng = np.random.default_rng(self.config.seed)
-        self._t_s = 0.0
+        self._n_samples = 0
         self._one_cmd = np.zeros(1)
         self._one_out = np.zeros((1, k.N_OUT))
         self.reset()
@@ -183,17 +186,29 @@ class Plant:
         return p
 
     # -- state -------------------------------------------------------------------------
+    def warm_up(self) -> None:
+        """Compile the kernel now (a no-op run on copies), so the first real-time step is fast.
+
+        numba compiles on first call; in a real-time node that first call would stall the
+        loop for about a second. The cached machine code makes later processes quick.
+        """
+        k.run_kernel(
+            self._params, self._state.copy(), self._ring.copy(), np.zeros(0), np.zeros((0, k.N_OUT))
+        )
+
     def reset(self) -> None:
         """Back to rest: vented muscle, straight tip, time zero, noise re-seeded."""
         self._state[:] = 0.0
         self._ring[:] = 0.0
         self._rng = np.random.default_rng(self.config.seed)
-        self._t_s = 0.0
+        self._n_samples = 0
 
     @property
     def t_s(self) -> float:
-        """Time of the next sample to be produced [s]."""
-        return self._t_s
+        """Time of the last sample produced [s] (0 at rest, before any)."""
+        # Time is an integer sample count times the period, in both paths: accumulating
+        # floats would make streamed and batch stamps differ in the last bits.
+        return self._n_samples * self.sample_period_s
 
     # -- sensors -----------------------------------------------------------------------
     def _sense(
@@ -203,7 +218,10 @@ class Plant:
         rig = self.config.rig
         geom = self.geometry
         pressure_pa = valve_pa + rig["pressure_noise_pa"] * noise[:, 0]
-        displacement_m = np.sign(angle_rad) * geom.angle_to_displacement_m(np.abs(angle_rad))
+        # Eq. 3.3 folds back past L/H (~68 deg): a ringing, unsaturated tip can get there, but
+        # the marker has then left the laser's range anyway (it clips below), so cap it.
+        reachable_rad = np.minimum(np.abs(angle_rad), 0.999 * geom.max_angle_rad)
+        displacement_m = np.sign(angle_rad) * geom.angle_to_displacement_m(reachable_rad)
         if self.config.enabled("drift"):
             rate = self.config.effect_param("drift", "rate_rad_per_s")
             # Near a straight tip, d(theta)/d(d') = 2 L / H^2 (eq. 3.3), so this is the
@@ -239,12 +257,14 @@ class Plant:
         n = cmd.shape[0]
         out = np.empty((n, k.N_OUT))
         k.run_kernel(self._params, self._state, self._ring, cmd, out)
-        t_s = self._t_s + self.sample_period_s * np.arange(1, n + 1)
+        t_s = self.sample_period_s * np.arange(
+            self._n_samples + 1, self._n_samples + n + 1, dtype=np.float64
+        )
         noise = self._rng.standard_normal((n, 2))
         pressure_pa, distance_m, angle_rad = self._sense(
             t_s, out[:, k.O_VALVE_PA], out[:, k.O_ANGLE_RAD], noise
         )
-        self._t_s += self.sample_period_s * n
+        self._n_samples += n
         return PlantOutput(
             t_s=t_s,
             pressure_command_pa=cmd,
@@ -264,14 +284,14 @@ class Plant:
         self._one_cmd[0] = command_pa
         self._check_commands(self._one_cmd)
         k.run_kernel(self._params, self._state, self._ring, self._one_cmd, self._one_out)
-        self._t_s += self.sample_period_s
-        t = np.array([self._t_s])
+        self._n_samples += 1
+        t = self.sample_period_s * np.arange(self._n_samples, self._n_samples + 1, dtype=np.float64)
         noise = self._rng.standard_normal((1, 2))
         pressure_pa, distance_m, angle_rad = self._sense(
             t, self._one_out[:, k.O_VALVE_PA], self._one_out[:, k.O_ANGLE_RAD], noise
         )
         return PlantSample(
-            t_s=self._t_s,
+            t_s=float(t[0]),
             pressure_command_pa=float(command_pa),
             pressure_measured_pa=float(pressure_pa[0]),
             distance_m=float(distance_m[0]),
