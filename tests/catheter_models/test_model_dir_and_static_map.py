@@ -1,0 +1,92 @@
+"""Model directories are hash-checked; the static map fits the central curve and inverts it."""
+
+import json
+
+import numpy as np
+import pytest
+
+from catheter_models.errors import ParameterError
+from catheter_models.model_dir import ModelDirError, read_model_dir, write_model_dir
+from catheter_models.plant import Plant, PlantConfig
+from catheter_models.signals import training_set
+from catheter_models.static_map import StaticMap
+
+
+def test_round_trip_and_manifest(tmp_path) -> None:
+    m = write_model_dir(tmp_path / "m", "demo", {"a": "rad"}, {"p": "Pa"}, {"w.json": b"[1,2]"})
+    manifest, payload = read_model_dir(tmp_path / "m", expected_kind="demo")
+    assert manifest == m
+    assert payload == {"w.json": b"[1,2]"}
+
+
+def test_tampered_weight_file_is_refused(tmp_path) -> None:
+    write_model_dir(tmp_path / "m", "demo", {}, {}, {"w.json": b"[1,2]"})
+    (tmp_path / "m" / "w.json").write_bytes(b"[1,3]")
+    with pytest.raises(ModelDirError, match=r"'w.json' fails its sha256 check"):
+        read_model_dir(tmp_path / "m")
+
+
+def test_missing_file_wrong_kind_and_garbage_manifest(tmp_path) -> None:
+    write_model_dir(tmp_path / "m", "demo", {}, {}, {"w.json": b"1"})
+    with pytest.raises(ModelDirError, match="expected 'static_map'"):
+        read_model_dir(tmp_path / "m", expected_kind="static_map")
+    (tmp_path / "m" / "w.json").unlink()
+    with pytest.raises(ModelDirError, match="missing"):
+        read_model_dir(tmp_path / "m")
+    (tmp_path / "g").mkdir()
+    (tmp_path / "g" / "manifest.json").write_text("{not json")
+    with pytest.raises(ModelDirError, match="malformed"):
+        read_model_dir(tmp_path / "g")
+    with pytest.raises(ModelDirError, match=r"no manifest\.json"):
+        read_model_dir(tmp_path / "nothing")
+
+
+def test_refuses_to_overwrite_a_model(tmp_path) -> None:
+    write_model_dir(tmp_path / "m", "demo", {}, {}, {"w": b"1"})
+    with pytest.raises(ModelDirError, match="already holds a model"):
+        write_model_dir(tmp_path / "m", "demo", {}, {}, {"w": b"2"})
+
+
+@pytest.fixture(scope="module")
+def training_run() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    cmd = np.concatenate([s.generate().values_si for s in training_set()])
+    out = Plant(PlantConfig.thesis_rig()).simulate(cmd)
+    return cmd, out.angle_rad, out.true_angle_rad
+
+
+def test_fit_lies_between_the_branches_and_is_monotone(training_run) -> None:
+    cmd, angle, _ = training_run
+    m = StaticMap.fit(cmd, angle)
+    assert np.all(np.diff(m.angle_rad) >= 0.0)
+    assert np.all(np.diff(m.pressure_pa) > 0.0)
+    # Below the opening pressure (~0.85 bar) the rig does not move, and the curve says so.
+    assert np.degrees(m.angle(0.5e5)) < 0.5
+    # Quasi-statically the rig bends about 18 deg/bar above the opening pressure.
+    assert 15.0 < np.degrees(m.angle(2.0e5)) < 25.0
+
+
+def test_inverse_of_forward_is_identity_on_the_moving_part(training_run) -> None:
+    cmd, angle, _ = training_run
+    m = StaticMap.fit(cmd, angle)
+    p = np.linspace(1.2e5, 2.5e5, 20)
+    np.testing.assert_allclose(m.pressure(m.angle(p)), p, rtol=0.02)
+
+
+def test_static_map_save_load_and_tamper(tmp_path, training_run) -> None:
+    cmd, angle, _ = training_run
+    m = StaticMap.fit(cmd, angle)
+    m.save(tmp_path / "sm")
+    loaded = StaticMap.load(tmp_path / "sm")
+    np.testing.assert_array_equal(loaded.angle_rad, m.angle_rad)
+    data = json.loads((tmp_path / "sm" / "static_map.json").read_text())
+    data["angle_rad"][5] += 0.1
+    (tmp_path / "sm" / "static_map.json").write_text(json.dumps(data))
+    with pytest.raises(ModelDirError):
+        StaticMap.load(tmp_path / "sm")
+
+
+def test_fit_refuses_bad_data() -> None:
+    with pytest.raises(ParameterError, match="NaN"):
+        StaticMap.fit([0.0, np.nan, 1.0], [0.0, 0.0, 0.0])
+    with pytest.raises(ParameterError, match="both loading and"):
+        StaticMap.fit(np.linspace(0, 3e5, 1000), np.linspace(0, 0.5, 1000))
