@@ -19,12 +19,14 @@ setup(
     zip_safe=False,
     maintainer="catheter maintainers",
     maintainer_email="maintainers@users.noreply.example",
-    description="Hardware side of the PAM catheter: device drivers and the simulated hardware node.",
+    description=(
+        "Hardware side of the PAM catheter: device drivers and the simulated hardware node."
+    ),
     license="Apache-2.0",
     python_requires=">=3.10",
     entry_points={
         "console_scripts": [
-            'sim_hardware = catheter_driver.sim_hardware_node:main',
+            "sim_hardware = catheter_driver.sim_hardware_node:main",
         ],
     },
 )

@@ -1,0 +1,119 @@
+"""A fixed-rate loop on its own thread, against absolute deadlines on the monotonic clock.
+
+rclpy timers showed p99 period errors of several milliseconds at 250 Hz here
+(docs/architecture.md), so real-time paths do not use them. Deadlines are absolute
+(``t0 + k * period``): a late tick does not push every later tick back.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class LoopStats:
+    """Timing of a deadline loop since start (or over the recent window for percentiles).
+
+    Attributes:
+        ticks: ticks run.
+        missed: ticks that started after the *next* deadline had already passed.
+        lateness_p50_s, lateness_p99_s: start time minus deadline, recent window [s].
+        compute_p50_s, compute_p99_s: time spent in the tick body, recent window [s].
+    """
+
+    ticks: int
+    missed: int
+    lateness_p50_s: float
+    lateness_p99_s: float
+    compute_p50_s: float
+    compute_p99_s: float
+
+
+class DeadlineLoop:
+    """Call ``tick(k, deadline_s)`` at ``rate_hz`` on a daemon thread until :meth:`stop`.
+
+    If a tick overruns past the following deadline, the missed deadlines are counted and the
+    loop resumes at the next future deadline rather than bursting to catch up: a controller
+    must not fire a volley of stale commands.
+
+    Args:
+        rate_hz: tick rate [Hz].
+        tick: the body; gets the tick index and its deadline on ``time.monotonic`` [s].
+        name: thread name (shows in ``py-spy`` and crash reports).
+        window: number of recent ticks kept for percentiles.
+    """
+
+    def __init__(
+        self, rate_hz: float, tick: Callable[[int, float], None], name: str, window: int = 5000
+    ) -> None:
+        if not rate_hz > 0.0:
+            raise ValueError(f"loop rate must be > 0 Hz, got {rate_hz!r}")
+        self.period_s = 1.0 / rate_hz
+        self._tick = tick
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self._lateness: deque[float] = deque(maxlen=window)
+        self._compute: deque[float] = deque(maxlen=window)
+        self._ticks = 0
+        self._missed = 0
+        self.error: BaseException | None = None
+        """An exception that ended the loop, kept for the owner to report."""
+
+    def start(self) -> None:
+        """Start ticking; the first deadline is one period from now."""
+        self._thread.start()
+
+    def stop(self, timeout_s: float = 1.0) -> None:
+        """Ask the loop to end and wait for the thread."""
+        self._stop.set()
+        if self._thread.is_alive() and threading.current_thread() is not self._thread:
+            self._thread.join(timeout_s)
+
+    @property
+    def running(self) -> bool:
+        """Whether the loop thread is alive."""
+        return self._thread.is_alive()
+
+    def _run(self) -> None:
+        t0 = time.monotonic()
+        k = 1
+        try:
+            while not self._stop.is_set():
+                deadline = t0 + k * self.period_s
+                delay = deadline - time.monotonic()
+                if delay > 0.0 and self._stop.wait(delay):
+                    break
+                start = time.monotonic()
+                self._tick(k, deadline)
+                end = time.monotonic()
+                self._lateness.append(start - deadline)
+                self._compute.append(end - start)
+                self._ticks += 1
+                # Skip deadlines already passed instead of bursting through them.
+                behind = int((end - deadline) / self.period_s)
+                if behind > 0:
+                    self._missed += behind
+                    k += behind
+                k += 1
+        except BaseException as exc:  # the owner decides; we must not die silently
+            self.error = exc
+            raise
+
+    def stats(self) -> LoopStats:
+        """Current statistics (percentiles over the recent window)."""
+        lat = np.fromiter(self._lateness, float) if self._lateness else np.zeros(1)
+        comp = np.fromiter(self._compute, float) if self._compute else np.zeros(1)
+        return LoopStats(
+            ticks=self._ticks,
+            missed=self._missed,
+            lateness_p50_s=float(np.percentile(lat, 50)),
+            lateness_p99_s=float(np.percentile(lat, 99)),
+            compute_p50_s=float(np.percentile(comp, 50)),
+            compute_p99_s=float(np.percentile(comp, 99)),
+        )

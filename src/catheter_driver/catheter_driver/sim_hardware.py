@@ -1,0 +1,105 @@
+"""The simulated rig behind the hardware topics, without ROS.
+
+It takes the place of the valve, the laser and both drivers (docs/architecture.md), so it
+keeps the drivers' safety duties too: commands are checked and clamped, and a watchdog vents
+the muscle when commands stop arriving.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import dataclass
+
+from catheter_models.plant import Plant, PlantConfig, PlantSample
+
+
+@dataclass(frozen=True)
+class CommandCounters:
+    """What happened to incoming commands since start.
+
+    Attributes:
+        received: commands seen.
+        refused_nonfinite: NaN/inf commands refused (the last good command stays in force).
+        clamped: commands outside [0, max_pressure_pa] applied at the limit.
+        watchdog_vents: times the watchdog vented after commands stopped.
+    """
+
+    received: int
+    refused_nonfinite: int
+    clamped: int
+    watchdog_vents: int
+
+
+class SimHardware:
+    """Plant + driver safety: command intake, clamping, watchdog, stepping.
+
+    Args:
+        config: plant configuration.
+        max_pressure_pa: highest gauge pressure ever applied [Pa]; higher commands clamp.
+        command_timeout_s: vent when no command has arrived for this long [s].
+    """
+
+    def __init__(
+        self, config: PlantConfig, max_pressure_pa: float = 3.0e5, command_timeout_s: float = 0.1
+    ) -> None:
+        self.plant = Plant(config)
+        self.max_pressure_pa = max_pressure_pa
+        self.command_timeout_s = command_timeout_s
+        self._lock = threading.Lock()
+        self._command_pa = 0.0
+        self._last_command_s: float | None = None
+        self._venting = True  # at rest until the first command arrives
+        self._received = 0
+        self._refused = 0
+        self._clamped = 0
+        self._vents = 0
+        self.last_refusal: str = ""
+
+    def command(self, gauge_pa: float, now_s: float) -> bool:
+        """Take a valve set-point (gauge [Pa]) received at monotonic time ``now_s``.
+
+        Returns:
+            False if the command was refused (non-finite); the previous one stays in force.
+        """
+        with self._lock:
+            self._received += 1
+            if not math.isfinite(gauge_pa):
+                self._refused += 1
+                self.last_refusal = f"refused non-finite pressure command {gauge_pa!r}"
+                return False
+            clamped = min(max(gauge_pa, 0.0), self.max_pressure_pa)
+            if clamped != gauge_pa:
+                self._clamped += 1
+            self._command_pa = clamped
+            self._last_command_s = now_s
+            self._venting = False
+            return True
+
+    def step(self, now_s: float) -> PlantSample:
+        """Advance the plant one sample with the command in force at monotonic ``now_s``."""
+        with self._lock:
+            stale = (
+                self._last_command_s is None
+                or now_s - self._last_command_s > self.command_timeout_s
+            )
+            if stale and not self._venting:
+                self._venting = True
+                self._vents += 1
+            command = 0.0 if self._venting else self._command_pa
+        return self.plant.step(command)
+
+    @property
+    def venting(self) -> bool:
+        """Whether the watchdog holds the valve vented (no recent command)."""
+        return self._venting
+
+    @property
+    def command_pa(self) -> float:
+        """The set-point in force, gauge [Pa] (0 while venting)."""
+        return 0.0 if self._venting else self._command_pa
+
+    def counters(self) -> CommandCounters:
+        """Command counters since start."""
+        with self._lock:
+            return CommandCounters(self._received, self._refused, self._clamped, self._vents)

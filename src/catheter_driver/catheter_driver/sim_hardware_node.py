@@ -1,0 +1,170 @@
+"""``sim_hardware``: the simulated rig as a ROS 2 node.
+
+Subscribes ``pressure/command``; publishes ``pressure/measured``, ``tip/distance`` and
+``tip/angle`` at the plant's sample rate (250 Hz), stamped on the plant's clock, and its health
+on ``/diagnostics``. Parameters ``effects.<name>.enabled`` and ``effects.<name>.<param>``
+switch and size every effect of docs/effects.md; ``rig.<param>`` sets the rig.
+"""
+
+from __future__ import annotations
+
+import time
+
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import FluidPressure, JointState, Range
+
+from catheter_driver import diagnostics, messages
+from catheter_driver.node_main import run_node
+from catheter_driver.params import declare_float, declare_int, declare_plain
+from catheter_driver.rt_loop import DeadlineLoop
+from catheter_driver.sim_hardware import SimHardware
+from catheter_models import __version__
+from catheter_models.contract import PRESSURE_COMMAND, PRESSURE_MEASURED, TIP_ANGLE, TIP_DISTANCE
+from catheter_models.plant.config import EFFECTS, RIG_PARAMS, ParamSpec, PlantConfig
+
+_MAX_PRESSURE = ParamSpec(
+    "max_pressure_pa", 3.0e5, 0.0, 6.0e5, "safety limit: commands above clamp here, gauge [Pa]"
+)
+_TIMEOUT = ParamSpec(
+    "command_timeout_s", 0.1, 0.01, 5.0, "vent when commands stop for longer than this [s]"
+)
+
+
+class SimHardwareNode(Node):
+    """Thin ROS shell over :class:`SimHardware`."""
+
+    def __init__(self) -> None:
+        super().__init__("sim_hardware")
+        seed = declare_int(
+            self, "seed", 0, low=0, high=2**31 - 1, doc="noise seed of the simulated rig"
+        )
+        config = PlantConfig.thesis_rig(seed=seed)
+        rig = {p.name: declare_float(self, f"rig.{p.name}", p) for p in RIG_PARAMS}
+        config = config.with_rig(**rig)
+        for name, spec in EFFECTS.items():
+            enabled = bool(
+                declare_plain(self, f"effects.{name}.enabled", config.enabled(name), spec.physics)
+            )
+            values = {
+                p.name: declare_float(self, f"effects.{name}.{p.name}", p) for p in spec.params
+            }
+            config = config.with_effect(name, enabled=enabled, **values)
+        self.ambient_pa = rig["ambient_pressure_pa"]
+        self.hw = SimHardware(
+            config,
+            max_pressure_pa=declare_float(self, "max_pressure_pa", _MAX_PRESSURE),
+            command_timeout_s=declare_float(self, "command_timeout_s", _TIMEOUT),
+        )
+        self.config = config
+        geom = self.hw.plant.geometry
+        self._range_limits_m = (
+            float(geom.voltage_to_distance_m(0.0)),
+            float(geom.voltage_to_distance_m(10.0)),
+        )
+
+        self._pub_pressure = self.create_publisher(
+            FluidPressure, PRESSURE_MEASURED.name, qos_profile_sensor_data
+        )
+        self._pub_distance = self.create_publisher(
+            Range, TIP_DISTANCE.name, qos_profile_sensor_data
+        )
+        self._pub_angle = self.create_publisher(JointState, TIP_ANGLE.name, qos_profile_sensor_data)
+        self._pub_diag = diagnostics.create_diagnostics_publisher(self)
+        self.create_subscription(
+            FluidPressure, PRESSURE_COMMAND.name, self._on_command, qos_profile_sensor_data
+        )
+        self.hw.plant.warm_up()
+        self._ros_minus_mono_ns: int | None = None
+        self._samples_done = 0
+        self._loop = DeadlineLoop(rig["sample_rate_hz"], self._tick, name="sim_hardware")
+        self.create_timer(1.0, self._publish_diagnostics)
+        on = [n for n in EFFECTS if config.enabled(n)]
+        self.get_logger().info(
+            f"simulated rig at {rig['sample_rate_hz']:g} Hz, effects on: {', '.join(on) or 'none'}"
+        )
+
+    def start(self) -> None:
+        """Start publishing sensor samples."""
+        self._loop.start()
+
+    def destroy_node(self) -> None:
+        """Stop the sample loop before the publishers go away."""
+        # A constructor that failed (a parameter refused) left no loop, but rclpy still
+        # destroys the half-built node when its context shuts down.
+        loop = getattr(self, "_loop", None)
+        if loop is not None:
+            loop.stop()
+        super().destroy_node()
+
+    def _on_command(self, msg: FluidPressure) -> None:
+        gauge_pa = messages.gauge_pa_from(msg, self.ambient_pa)
+        if not self.hw.command(gauge_pa, time.monotonic()):
+            self.get_logger().warning(self.hw.last_refusal, throttle_duration_sec=1.0)
+
+    def _tick(self, k: int, deadline_s: float) -> None:
+        if self._ros_minus_mono_ns is None:
+            self._ros_minus_mono_ns = self.get_clock().now().nanoseconds - round(
+                time.monotonic() * 1e9
+            )
+        # The rig samples whether or not this thread ran on time: after an overrun, step
+        # through every missed sample and publish the backlog with its true stamps, as a
+        # sensor driver drains its buffer. Stamps are the sampling instants (monotonic
+        # deadlines mapped to ROS time), so bags align across nodes.
+        period_s = self._loop.period_s
+        while self._samples_done < k:
+            self._samples_done += 1
+            sample_time_s = deadline_s - (k - self._samples_done) * period_s
+            sample = self.hw.step(sample_time_s)
+            stamp_ns = self._ros_minus_mono_ns + round(sample_time_s * 1e9)
+            self._pub_pressure.publish(
+                messages.fluid_pressure(sample.pressure_measured_pa, stamp_ns, "", self.ambient_pa)
+            )
+            self._pub_distance.publish(
+                messages.laser_range(sample.distance_m, stamp_ns, *self._range_limits_m)
+            )
+            self._pub_angle.publish(messages.joint_state(sample.angle_rad, stamp_ns))
+
+    def _publish_diagnostics(self) -> None:
+        counters = self.hw.counters()
+        stats = self._loop.stats()
+        level = diagnostics.OK
+        message = "running"
+        if self._loop.error is not None:
+            level, message = diagnostics.ERROR, f"sample loop died: {self._loop.error!r}"
+        elif self.hw.venting:
+            level, message = diagnostics.WARN, "watchdog: no pressure command, valve vented"
+        elif counters.refused_nonfinite:
+            level, message = diagnostics.WARN, self.hw.last_refusal
+        values: dict[str, object] = {
+            "commands_received": counters.received,
+            "commands_refused_nonfinite": counters.refused_nonfinite,
+            "commands_clamped": counters.clamped,
+            "watchdog_vents": counters.watchdog_vents,
+            "venting": self.hw.venting,
+            "command_bar": f"{self.hw.command_pa / 1e5:.4f}",
+            "samples": stats.ticks,
+            "missed_deadlines": stats.missed,
+            "lateness_p99_ms": f"{stats.lateness_p99_s * 1e3:.3f}",
+            "software_version": __version__,
+        }
+        values.update(self.config.describe())
+        diagnostics.publish_status(
+            self._pub_diag,
+            self,
+            level=level,
+            message=message,
+            values=values,
+            hardware_id="sim_hardware",
+        )
+
+
+def main(args: list[str] | None = None) -> None:
+    """Entry point of ``ros2 run catheter_driver sim_hardware``."""
+    code = run_node(SimHardwareNode, args)
+    if code:
+        raise SystemExit(code)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,48 @@
+"""The deadline loop keeps absolute deadlines and counts misses instead of bursting."""
+
+import itertools
+import time
+
+import pytest
+
+from catheter_driver.rt_loop import DeadlineLoop
+
+
+def test_ticks_at_rate_on_absolute_deadlines() -> None:
+    deadlines: list[float] = []
+    loop = DeadlineLoop(200.0, lambda k, d: deadlines.append(d), name="t")
+    loop.start()
+    time.sleep(0.5)
+    loop.stop()
+    assert 80 <= len(deadlines) <= 101
+    gaps = [b - a for a, b in itertools.pairwise(deadlines)]
+    assert all(abs(g - 0.005) < 1e-9 for g in gaps), "deadlines are t0 + k*period exactly"
+
+
+def test_overrun_skips_missed_deadlines() -> None:
+    ks: list[int] = []
+
+    def slow(k: int, _d: float) -> None:
+        ks.append(k)
+        if k == 3:
+            time.sleep(0.055)  # overrun by ~10 periods
+
+    loop = DeadlineLoop(200.0, slow, name="t")
+    loop.start()
+    time.sleep(0.2)
+    loop.stop()
+    stats = loop.stats()
+    assert stats.missed >= 9
+    assert ks[3] - ks[2] >= 10, "the loop resumes at the next future deadline, no burst"
+
+
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnhandledThreadExceptionWarning")
+def test_an_exception_is_kept_for_the_owner() -> None:
+    def boom(k: int, _d: float) -> None:
+        raise RuntimeError("tick failed")
+
+    loop = DeadlineLoop(100.0, boom, name="t")
+    loop.start()
+    time.sleep(0.1)
+    assert isinstance(loop.error, RuntimeError)
+    assert not loop.running
