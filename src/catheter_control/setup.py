@@ -8,7 +8,8 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(exclude=["test", "tests"]),
-    package_data={PACKAGE: ["py.typed"]},
+    # The shipped models (manifest + hashed weights) travel inside the package.
+    package_data={PACKAGE: ["py.typed", "data/*/*"]},
     data_files=[
         # The ament resource marker and package.xml are what `ros2 run` and
         # ament_index_python look for; colcon installs them under share/.
@@ -19,16 +20,19 @@ setup(
     zip_safe=False,
     maintainer="catheter maintainers",
     maintainer_email="maintainers@users.noreply.example",
-    description="Control side of the PAM catheter: compensator, recorder, open-loop excitation, follow_trajectory and bring-up.",
+    description=(
+        "Control side of the PAM catheter: compensator, recorder, ope"
+        "n-loop excitation, follow_trajectory and bring-up."
+    ),
     license="Apache-2.0",
     python_requires=">=3.10",
     entry_points={
         "console_scripts": [
-            'compensator = catheter_control.compensator_node:main',
-            'recorder = catheter_control.recorder_node:main',
-            'excite = catheter_control.excite_node:main',
-            'follow_trajectory = catheter_control.follow_trajectory:main',
-            'bringup = catheter_control.bringup:main',
+            "compensator = catheter_control.compensator_node:main",
+            "recorder = catheter_control.recorder_node:main",
+            "excite = catheter_control.excite_node:main",
+            "follow_trajectory = catheter_control.follow_trajectory:entry",
+            "bringup = catheter_control.bringup:main",
         ],
     },
 )

@@ -19,12 +19,15 @@ setup(
     zip_safe=False,
     maintainer="catheter maintainers",
     maintainer_email="maintainers@users.noreply.example",
-    description="Science core of the PAM catheter stack: signals, metrics, plant simulation, geometry, bag I/O. Imports no rclpy.",
+    description=(
+        "Science core of the PAM catheter stack: signals, metrics, pl"
+        "ant simulation, geometry, bag I/O. Imports no rclpy."
+    ),
     license="Apache-2.0",
     python_requires=">=3.10",
     entry_points={
         "console_scripts": [
-            'catheter-lab = catheter_models.cli:main',
+            "catheter-lab = catheter_models.cli:main",
         ],
     },
 )

@@ -1,0 +1,242 @@
+"""``bringup``: start a whole simulated graph for the main job.
+
+Separate processes by default (what a lab runs, and what the integration tests check), or
+composed in one process with ``--compose`` (one executor, less start-up cost). The graph is
+``sim_hardware``, ``compensator`` and, given a bag path, ``recorder``, all in one namespace.
+
+Shutdown order matters for safety and for the record: the compensator stops first (the
+simulated driver's watchdog then vents), then the rig, and the recorder last so the bag holds
+the vent and is closed cleanly.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import TracebackType
+
+from catheter_models.contract import DEFAULT_NAMESPACE
+
+Params = Mapping[str, object]
+
+
+def _ros_value(value: object) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        # Quote so that YAML keeps it a string (e.g. JSON objects, empty strings).
+        return json.dumps(value)
+    return repr(value)
+
+
+@dataclass
+class NodeSpec:
+    """One node of the graph: its module (with a ``main``) and parameters."""
+
+    name: str
+    module: str
+    params: dict[str, object] = field(default_factory=dict)
+
+    def argv(self, namespace: str) -> list[str]:
+        """Command line that runs the node with this interpreter."""
+        args = [sys.executable, "-m", self.module, "--ros-args", "-r", f"__ns:={namespace}"]
+        for key, value in self.params.items():
+            args += ["-p", f"{key}:={_ros_value(value)}"]
+        return args
+
+
+def sim_graph_specs(
+    bag_path: Path | None = None,
+    custom_data: Mapping[str, str] | None = None,
+    sim_params: Params | None = None,
+    compensator_params: Params | None = None,
+    with_compensator: bool = True,
+) -> list[NodeSpec]:
+    """The simulated graph, in start order: recorder, rig, compensator."""
+    specs = []
+    if bag_path is not None:
+        specs.append(
+            NodeSpec(
+                "recorder",
+                "catheter_control.recorder_node",
+                {"bag_path": str(bag_path), "custom_data": json.dumps(dict(custom_data or {}))},
+            )
+        )
+    specs.append(
+        NodeSpec("sim_hardware", "catheter_driver.sim_hardware_node", dict(sim_params or {}))
+    )
+    if with_compensator:
+        specs.append(
+            NodeSpec(
+                "compensator", "catheter_control.compensator_node", dict(compensator_params or {})
+            )
+        )
+    return specs
+
+
+class ProcessGraph:
+    """Run node specs as child processes; context manager with ordered, bounded shutdown.
+
+    Args:
+        specs: nodes in start order (stopped in reverse).
+        namespace: ROS namespace of every node.
+        log_dir: where each node's stdout/stderr go (``<name>.log``); inherited if None.
+        env: extra environment (e.g. ``ROS_DOMAIN_ID``).
+    """
+
+    def __init__(
+        self,
+        specs: Sequence[NodeSpec],
+        namespace: str = DEFAULT_NAMESPACE,
+        log_dir: Path | None = None,
+        env: Mapping[str, str] | None = None,
+    ) -> None:
+        self.specs = list(specs)
+        self.namespace = namespace
+        self.log_dir = log_dir
+        self.env = {**os.environ, **(env or {})}
+        self.procs: dict[str, subprocess.Popen[bytes]] = {}
+
+    def start(self) -> None:
+        """Start every node."""
+        for spec in self.specs:
+            out = None
+            if self.log_dir is not None:
+                self.log_dir.mkdir(parents=True, exist_ok=True)
+                out = (self.log_dir / f"{spec.name}.log").open("wb")
+            self.procs[spec.name] = subprocess.Popen(
+                spec.argv(self.namespace),
+                stdout=out,
+                stderr=subprocess.STDOUT if out else None,
+                env=self.env,
+            )
+
+    def failed(self) -> dict[str, int]:
+        """Nodes that have exited already, with their exit codes."""
+        return {n: p.returncode for n, p in self.procs.items() if p.poll() is not None}
+
+    def log_tail(self, name: str, lines: int = 20) -> str:
+        """Last lines of a node's log (empty if logs are inherited)."""
+        if self.log_dir is None:
+            return ""
+        path = self.log_dir / f"{name}.log"
+        if not path.exists():
+            return ""
+        return "\n".join(path.read_text(errors="replace").splitlines()[-lines:])
+
+    def stop(self, timeout_s: float = 10.0) -> dict[str, int]:
+        """SIGINT each node in reverse start order, escalating to SIGKILL after ``timeout_s``."""
+        codes = {}
+        for spec in reversed(self.specs):
+            proc = self.procs.get(spec.name)
+            if proc is None:
+                continue
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+                try:
+                    proc.wait(timeout_s)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait()
+            codes[spec.name] = proc.returncode
+        return codes
+
+    def __enter__(self) -> ProcessGraph:
+        self.start()
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.stop()
+
+
+def run_composed(specs: Sequence[NodeSpec], namespace: str) -> None:
+    """Run the nodes in this process on one multi-threaded executor until Ctrl-C."""
+    import importlib
+    import tempfile
+
+    import rclpy
+    import yaml
+    from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+
+    # Per-node parameters in one process need a params file keyed by the node's full name.
+    ns = namespace.rstrip("/")
+    params = {f"{ns}/{spec.name}": {"ros__parameters": dict(spec.params)} for spec in specs}
+    with tempfile.NamedTemporaryFile("w", suffix=".yaml", delete=False) as fh:
+        yaml.safe_dump(params, fh)
+    argv = ["--ros-args", "-r", f"__ns:={namespace}", "--params-file", fh.name]
+    nodes = []
+    try:
+        with rclpy.init(args=["bringup", *argv]):
+            executor = MultiThreadedExecutor()
+            for spec in specs:
+                module = importlib.import_module(spec.module)
+                node_cls = next(
+                    getattr(module, n) for n in dir(module) if n.endswith("Node") and n != "Node"
+                )
+                node = node_cls()
+                nodes.append(node)
+                executor.add_node(node)
+            for node in nodes:
+                if hasattr(node, "start"):
+                    node.start()
+            executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        for node in reversed(nodes):
+            if hasattr(node, "close"):
+                node.close()
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point of ``ros2 run catheter_control bringup``."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--bag", type=Path, help="record to this new bag directory")
+    parser.add_argument("--namespace", default=DEFAULT_NAMESPACE)
+    parser.add_argument("--compose", action="store_true", help="all nodes in one process")
+    parser.add_argument("--no-compensator", action="store_true", help="rig (and recorder) only")
+    parser.add_argument(
+        "--sim-param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="sim_hardware parameter, e.g. effects.pneumatic_lag.enabled=true",
+    )
+    args = parser.parse_args(argv)
+    sim_params: dict[str, object] = {}
+    for item in args.sim_param:
+        key, _, raw = item.partition("=")
+        sim_params[key] = json.loads(raw) if raw not in {"true", "false"} else raw == "true"
+    specs = sim_graph_specs(
+        args.bag, {"source": "bringup"}, sim_params, with_compensator=not args.no_compensator
+    )
+    if args.compose:
+        run_composed(specs, args.namespace)
+        return
+    graph = ProcessGraph(specs, args.namespace)
+    graph.start()
+    try:
+        while not graph.failed():
+            time.sleep(0.2)
+        print(f"bringup: a node exited: {graph.failed()}", file=sys.stderr)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        graph.stop()
+
+
+if __name__ == "__main__":
+    main()

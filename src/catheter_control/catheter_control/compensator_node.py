@@ -1,0 +1,221 @@
+"""``compensator``: turn a desired-angle trajectory into pressure commands on a real-time loop.
+
+Subscribes ``trajectory`` (validated whole before a single command goes out), publishes
+``pressure/command`` and ``angle/desired`` at ``control_rate_hz`` from its own thread against
+absolute monotonic deadlines, and its timing and refusals on ``/diagnostics``.
+Service ``stop`` (std_srvs/Trigger) ramps the pressure down.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+from rclpy.node import Node
+from sensor_msgs.msg import FluidPressure, JointState
+from std_srvs.srv import Trigger
+from trajectory_msgs.msg import JointTrajectory
+
+from catheter_control import qos
+from catheter_control.control_core import ControlCore
+from catheter_control.models import COMPENSATORS, load_compensator
+from catheter_control.trajectory import TrajectoryLimits, TrajectoryPlan
+from catheter_driver import diagnostics, messages
+from catheter_driver.node_main import run_node
+from catheter_driver.params import declare_float, declare_plain
+from catheter_driver.rt_loop import DeadlineLoop
+from catheter_models import __version__
+from catheter_models.contract import ANGLE_DESIRED, BEND_JOINT, PRESSURE_COMMAND, TRAJECTORY
+from catheter_models.errors import CatheterError, ParameterError
+from catheter_models.plant.config import ParamSpec
+from catheter_models.units import AMBIENT_PRESSURE_PA, deg_to_rad
+
+_RATE = ParamSpec("control_rate_hz", 250.0, 10.0, 2000.0, "control loop rate [Hz]")
+_PMIN = ParamSpec("min_pressure_pa", 0.0, 0.0, 6.0e5, "lowest command, gauge [Pa]")
+_PMAX = ParamSpec("max_pressure_pa", 3.0e5, 0.0, 6.0e5, "highest command, gauge [Pa]")
+_SLEW = ParamSpec("max_slew_pa_per_s", 20.0e5, 1.0e3, 1.0e8, "command slew limit [Pa/s]")
+_AMAX = ParamSpec("max_angle_rad", deg_to_rad(35.0), 0.0, 1.18, "highest desired bend [rad]")
+_VMAX = ParamSpec(
+    "max_rate_rad_s", deg_to_rad(200.0), 0.0, 100.0, "fastest desired bend rate [rad/s]"
+)
+_ACC = ParamSpec(
+    "max_accel_rad_s2", deg_to_rad(5000.0), 0.0, 1e4, "highest desired accel [rad/s^2]"
+)
+_WAIT = ParamSpec(
+    "driver_wait_s", 5.0, 0.0, 60.0, "hold a plan this long for a valve driver to listen [s]"
+)
+_AMB = ParamSpec("ambient_pressure_pa", AMBIENT_PRESSURE_PA, 5.0e4, 1.2e5, "ambient pressure [Pa]")
+
+
+class CompensatorNode(Node):
+    """Thin ROS shell over :class:`ControlCore`."""
+
+    def __init__(self) -> None:
+        super().__init__("compensator")
+        kind = str(declare_plain(self, "compensator", "none", f"one of {', '.join(COMPENSATORS)}"))
+        model_dir = str(declare_plain(self, "model_dir", "", "model directory ('' = shipped)"))
+        self.rate_hz = declare_float(self, "control_rate_hz", _RATE)
+        pmin = declare_float(self, "min_pressure_pa", _PMIN)
+        pmax = declare_float(self, "max_pressure_pa", _PMAX)
+        if pmin > pmax:
+            raise ParameterError(f"min_pressure_pa {pmin} exceeds max_pressure_pa {pmax}")
+        self.limits = TrajectoryLimits(
+            max_angle_rad=declare_float(self, "max_angle_rad", _AMAX),
+            max_rate_rad_s=declare_float(self, "max_rate_rad_s", _VMAX),
+            max_accel_rad_s2=declare_float(self, "max_accel_rad_s2", _ACC),
+        )
+        self.ambient_pa = declare_float(self, "ambient_pressure_pa", _AMB)
+        self.driver_wait_s = declare_float(self, "driver_wait_s", _WAIT)
+        self._pending: tuple[TrajectoryPlan, float] | None = None
+        self.kind = kind
+        self.core = ControlCore(
+            load_compensator(kind, model_dir),
+            pmin,
+            pmax,
+            declare_float(self, "max_slew_pa_per_s", _SLEW),
+        )
+        self._lock = threading.Lock()
+        self._refusals = 0
+        self._last_refusal = ""
+        self._accepted = 0
+
+        self._pub_cmd = self.create_publisher(FluidPressure, PRESSURE_COMMAND.name, qos.SENSOR)
+        self._pub_des = self.create_publisher(JointState, ANGLE_DESIRED.name, qos.SENSOR)
+        self._pub_diag = diagnostics.create_diagnostics_publisher(self)
+        self.create_subscription(
+            JointTrajectory, TRAJECTORY.name, self._on_trajectory, qos.TRAJECTORY
+        )
+        self.create_service(Trigger, "~/stop", self._on_stop)
+        self.create_timer(1.0, self._publish_diagnostics)
+        self._mono_t0 = time.monotonic()
+        self._ros_t0_ns = self.get_clock().now().nanoseconds
+        self._loop = DeadlineLoop(self.rate_hz, self._tick, name="compensator")
+        self.get_logger().info(f"compensator {kind!r} at {self.rate_hz:g} Hz")
+
+    def start(self) -> None:
+        """Start the control loop."""
+        self._loop.start()
+
+    def destroy_node(self) -> None:
+        """Stop the loop before the publishers go away."""
+        # A constructor that failed (a parameter refused) left no loop, but rclpy still
+        # destroys the half-built node when its context shuts down.
+        loop = getattr(self, "_loop", None)
+        if loop is not None:
+            loop.stop()
+        super().destroy_node()
+
+    def _stamp_ns(self, mono_s: float) -> int:
+        return self._ros_t0_ns + round((mono_s - self._mono_t0) * 1e9)
+
+    def _refuse(self, reason: str) -> None:
+        with self._lock:
+            self._refusals += 1
+            self._last_refusal = reason
+        self.get_logger().error(f"trajectory refused: {reason}")
+        self._publish_diagnostics()
+
+    def _on_trajectory(self, msg: JointTrajectory) -> None:
+        names = list(msg.joint_names)
+        if BEND_JOINT not in names:
+            self._refuse(f"joint_names {names!r} lack {BEND_JOINT!r}")
+            return
+        j = names.index(BEND_JOINT)
+        times, angles = [], []
+        for i, point in enumerate(msg.points):
+            if len(point.positions) <= j:
+                self._refuse(f"point {i} has no position for {BEND_JOINT!r}")
+                return
+            times.append(point.time_from_start.sec + point.time_from_start.nanosec * 1e-9)
+            angles.append(point.positions[j])
+        try:
+            plan = TrajectoryPlan.from_knots(times, angles, self.limits, self.rate_hz)
+        except CatheterError as exc:
+            self._refuse(str(exc))
+            return
+        with self._lock:
+            # Start on the control thread once a valve driver listens: commands sent before
+            # DDS has matched it would go nowhere while the plan's clock runs on.
+            self._pending = (plan, time.monotonic() + self.driver_wait_s)
+            self._accepted += 1
+        self.get_logger().info(
+            f"accepted a {plan.duration_s:.2f} s trajectory ({len(msg.points)} points)"
+        )
+
+    def _on_stop(self, _req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
+        with self._lock:
+            self.core.stop()
+        resp.success = True
+        resp.message = "ramping pressure down"
+        return resp
+
+    def _tick(self, _k: int, deadline_s: float) -> None:
+        refusal = ""
+        with self._lock:
+            if self._pending is not None:
+                plan, give_up_s = self._pending
+                if self._pub_cmd.get_subscription_count() > 0:
+                    self.core.start(plan, deadline_s)
+                    self._pending = None
+                elif deadline_s > give_up_s:
+                    self._pending = None
+                    refusal = (
+                        f"no valve driver subscribes to "
+                        f"{self._pub_cmd.topic_name} after {self.driver_wait_s:g} s"
+                    )
+            out = self.core.tick(deadline_s, self._loop.period_s)
+        if refusal:
+            self._refuse(refusal)
+        if out is None:
+            return
+        stamp_ns = self._stamp_ns(deadline_s)
+        self._pub_cmd.publish(
+            messages.fluid_pressure(out.pressure_pa, stamp_ns, "", self.ambient_pa)
+        )
+        self._pub_des.publish(messages.joint_state(out.angle_desired_rad, stamp_ns))
+
+    def _publish_diagnostics(self) -> None:
+        stats = self._loop.stats()
+        with self._lock:
+            refusals, last, accepted = self._refusals, self._last_refusal, self._accepted
+            state, bad_model = self.core.state, self.core.nonfinite_from_compensator
+        level, message = diagnostics.OK, state
+        if self._loop.error is not None:
+            level, message = diagnostics.ERROR, f"control loop died: {self._loop.error!r}"
+        elif bad_model:
+            level, message = (
+                diagnostics.ERROR,
+                "compensator produced non-finite pressure; ramped down",
+            )
+        elif refusals:
+            level, message = diagnostics.WARN, f"trajectory refused: {last}"
+        diagnostics.publish_status(
+            self._pub_diag,
+            self,
+            level=level,
+            message=message,
+            values={
+                "state": state,
+                "compensator": self.kind,
+                "trajectories_accepted": accepted,
+                "trajectories_refused": refusals,
+                "last_refusal": last,
+                "ticks": stats.ticks,
+                "missed_deadlines": stats.missed,
+                "lateness_p50_ms": f"{stats.lateness_p50_s * 1e3:.3f}",
+                "lateness_p99_ms": f"{stats.lateness_p99_s * 1e3:.3f}",
+                "compute_p99_ms": f"{stats.compute_p99_s * 1e3:.3f}",
+                "software_version": __version__,
+            },
+        )
+
+
+def main(args: list[str] | None = None) -> None:
+    """Entry point of ``ros2 run catheter_control compensator``."""
+    code = run_node(CompensatorNode, args)
+    if code:
+        raise SystemExit(code)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,166 @@
+"""``excite``: open-loop excitation, data acquisition as in thesis ch. 4.
+
+Publishes one of the thesis's pressure signals on ``pressure/command`` at ``rate_hz`` (from its
+own deadline loop, stamped with the intended application time), then holds zero pressure for
+``tail_s`` so the recording ends at rest, and exits. The whole signal is checked against the
+pressure range before the first sample goes out.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import rclpy
+from rclpy.node import Node
+from sensor_msgs.msg import FluidPressure
+
+from catheter_control import qos
+from catheter_driver import diagnostics, messages
+from catheter_driver.node_main import run_node
+from catheter_driver.params import declare_float, declare_plain
+from catheter_driver.rt_loop import DeadlineLoop
+from catheter_models.contract import PRESSURE_COMMAND
+from catheter_models.errors import SignalError
+from catheter_models.plant.config import ParamSpec
+from catheter_models.signals import (
+    check_pressure_signal,
+    clstm_training_set,
+    get_preset,
+    training_set,
+)
+from catheter_models.units import AMBIENT_PRESSURE_PA
+
+_RATE = ParamSpec("rate_hz", 250.0, 10.0, 2000.0, "command rate [Hz]")
+_PMAX = ParamSpec("max_pressure_pa", 3.0e5, 0.0, 6.0e5, "refuse signals above this, gauge [Pa]")
+_TAIL = ParamSpec("tail_s", 1.0, 0.0, 60.0, "zero pressure held after the signal [s]")
+_WAIT = ParamSpec("wait_for_subscriber_s", 10.0, 0.0, 600.0, "wait this long for a listener [s]")
+_SLEW = ParamSpec(
+    "ramp_down_pa_per_s", 2.0e5, 1.0e3, 1.0e7, "slew of the ramp to zero after a signal [Pa/s]"
+)
+_LINGER_S = 0.5
+_AMB = ParamSpec("ambient_pressure_pa", AMBIENT_PRESSURE_PA, 5.0e4, 1.2e5, "ambient pressure [Pa]")
+
+
+class ExciteNode(Node):
+    """Publishes a whole pressure signal, then signals ``done``."""
+
+    def __init__(self) -> None:
+        super().__init__("excite")
+        name = str(
+            declare_plain(
+                self,
+                "signal",
+                "training",
+                "thesis pressure preset, a comma-separated list of them, or a protocol: "
+                "'training' (the 8 signals of thesis 4.1.1) or 'clstm_training' (sec. 10.3.1)",
+            )
+        )
+        self.rate_hz = declare_float(self, "rate_hz", _RATE)
+        max_pa = declare_float(self, "max_pressure_pa", _PMAX)
+        tail_s = declare_float(self, "tail_s", _TAIL)
+        ramp_pa_per_s = declare_float(self, "ramp_down_pa_per_s", _SLEW)
+        self.wait_s = declare_float(self, "wait_for_subscriber_s", _WAIT)
+        self.ambient_pa = declare_float(self, "ambient_pressure_pa", _AMB)
+        if name == "training":
+            specs = training_set()
+        elif name == "clstm_training":
+            specs = clstm_training_set()
+        else:
+            specs = tuple(get_preset(n.strip()) for n in name.split(","))
+        pieces = []
+        tail = np.zeros(round(tail_s * self.rate_hz))
+        for spec in specs:
+            if spec.kind != "pressure":
+                raise SignalError(
+                    f"preset {spec.name!r} is an angle trajectory; excite sends pressure"
+                )
+            signal = spec.generate(self.rate_hz)
+            check_pressure_signal(signal.values_si, 0.0, max_pa)
+            # Each signal ends at rest, so the next one starts from the same state as the
+            # thesis's separate recordings did. Signals with a baseline (eq. 4.2) end at
+            # 1.5 bar: ramp down instead of stepping the valve.
+            last_pa = float(signal.values_si[-1])
+            n_ramp = int(np.ceil(last_pa / ramp_pa_per_s * self.rate_hz))
+            ramp = np.linspace(last_pa, 0.0, n_ramp + 1)[1:] if n_ramp > 0 else np.zeros(0)
+            pieces += [signal.values_si, ramp, tail]
+        self.values_pa = np.concatenate(pieces)
+        self.spec_names = [spec.name for spec in specs]
+        self.signal_name = name
+        self.done = threading.Event()
+        self._pub = self.create_publisher(FluidPressure, PRESSURE_COMMAND.name, qos.SENSOR)
+        self._pub_diag = diagnostics.create_diagnostics_publisher(self)
+        self._first_k: int | None = None
+        self._ros_minus_mono_ns = 0
+        self._wait_until_s = 0.0
+        self.failure = ""
+        self._loop = DeadlineLoop(self.rate_hz, self._tick, name="excite")
+        self.get_logger().info(
+            f"signal {name!r} ({len(specs)} part(s)): {self.values_pa.size / self.rate_hz:.1f} s "
+            f"at {self.rate_hz:g} Hz, peak {self.values_pa.max() / 1e5:.2f} bar"
+        )
+
+    def start(self) -> None:
+        """Start the loop; sending begins once something listens on the command topic."""
+        self._wait_until_s = time.monotonic() + self.wait_s
+        self._loop.start()
+
+    def _tick(self, k: int, deadline_s: float) -> None:
+        if self._first_k is None:
+            # Commands into the void are not data acquisition: wait for the rig to listen.
+            if self._pub.get_subscription_count() > 0:
+                self._first_k = k
+                self._ros_minus_mono_ns = self.get_clock().now().nanoseconds - round(
+                    time.monotonic() * 1e9
+                )
+            elif deadline_s > self._wait_until_s:
+                self.failure = (
+                    f"nobody subscribes to {self.resolve_topic_name(PRESSURE_COMMAND.name)} "
+                    f"after {self.wait_s:g} s; is the rig (or sim_hardware) running?"
+                )
+                self.done.set()
+            return
+        i = k - self._first_k
+        if i >= self.values_pa.size:
+            self.done.set()
+            return
+        stamp_ns = self._ros_minus_mono_ns + round(deadline_s * 1e9)
+        self._pub.publish(
+            messages.fluid_pressure(float(self.values_pa[i]), stamp_ns, "", self.ambient_pa)
+        )
+
+    def close(self) -> None:
+        """Stop sending (idempotent)."""
+        self._loop.stop()
+
+
+def main(args: list[str] | None = None) -> None:
+    """Entry point of ``ros2 run catheter_control excite``; exits when the signal is sent."""
+    nodes: list[ExciteNode] = []
+
+    def build() -> ExciteNode:
+        nodes.append(ExciteNode())
+        return nodes[0]
+
+    done_at: list[float] = []
+
+    def finished(node: ExciteNode) -> bool:
+        # Linger after the last sample: best-effort messages still in flight would be lost
+        # with the participant, and the recorder would miss the end of the signal.
+        if node.done.is_set() and not done_at:
+            done_at.append(time.monotonic())
+        return bool(done_at) and time.monotonic() - done_at[0] > _LINGER_S
+
+    code = run_node(build, args, until=finished)  # type: ignore[arg-type]
+    if code == 0 and nodes and nodes[0].failure:
+        rclpy.logging.get_logger("excite").fatal(nodes[0].failure)
+        code = 3
+    elif code == 0 and nodes:
+        nodes[0].get_logger().info(f"signal {nodes[0].signal_name!r} sent")
+    if code:
+        raise SystemExit(code)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,276 @@
+"""``follow_trajectory``: send a desired-angle trajectory, watch it run, report how well it went.
+
+    ros2 run catheter_control follow_trajectory --preset traj_descending_sine
+    follow_trajectory --sim --preset traj_up_chirp        # bring up the simulated rig first
+    follow_trajectory --file my_path.csv                  # columns t_s, angle_deg
+
+It validates the trajectory before anything moves, publishes it on ``trajectory``, shows
+progress, then prints RMSE, MAE (maximum absolute error) and NRMSE of ``tip/angle`` against
+``angle/desired``, saves a plot, and says where the bag is.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import math
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from catheter_control.trajectory import (
+    TrajectoryLimits,
+    TrajectoryPlan,
+    load_trajectory_file,
+    preset_knots,
+)
+from catheter_models.contract import DEFAULT_NAMESPACE
+from catheter_models.errors import CatheterError
+from catheter_models.signals import TEST_TRAJECTORIES, get_preset
+
+EXIT_REFUSED = 2
+EXIT_GRAPH = 3
+_START_TIMEOUT_S = 8.0
+"""The compensator holds a plan up to 5 s for its valve driver; allow for that and more."""
+
+
+@dataclass
+class _Collected:
+    desired: list[tuple[float, float]] = field(default_factory=list)
+    measured: list[tuple[float, float]] = field(default_factory=list)
+    refusal: str = ""
+
+
+def _parse(argv: list[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(
+        prog="follow_trajectory", description="Follow a desired-angle trajectory and report."
+    )
+    src = parser.add_mutually_exclusive_group()
+    src.add_argument(
+        "--preset",
+        default="traj_descending_sine",
+        help=f"thesis trajectory (sec. 9.3): {', '.join(TEST_TRAJECTORIES)}",
+    )
+    src.add_argument("--file", type=Path, help="CSV (t_s, angle_deg|angle_rad) or YAML trajectory")
+    parser.add_argument("--sim", action="store_true", help="bring up the simulated rig first")
+    parser.add_argument("--out", type=Path, help="run directory (default runs/<time>-<name>)")
+    parser.add_argument("--namespace", default=DEFAULT_NAMESPACE)
+    parser.add_argument("--control-rate-hz", type=float, default=250.0)
+    parser.add_argument(
+        "--timeout-s", type=float, default=60.0, help="wait for the graph this long"
+    )
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    return parser.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point; returns the process exit code."""
+    args = _parse(argv)
+    limits = TrajectoryLimits()
+    try:
+        if args.file is not None:
+            name = args.file.stem
+            t_s, angle_rad = load_trajectory_file(args.file)
+            signal_params: dict[str, object] = {"file": str(args.file)}
+        else:
+            name = args.preset
+            t_s, angle_rad = preset_knots(name)
+            signal_params = dict(get_preset(name).params())
+        # Refuse a bad trajectory here, before any node starts or anything moves.
+        plan = TrajectoryPlan.from_knots(t_s, angle_rad, limits, args.control_rate_hz, name)
+    except CatheterError as exc:
+        print(f"follow_trajectory: trajectory refused: {exc}", file=sys.stderr)
+        return EXIT_REFUSED
+
+    run_dir = args.out or Path("runs") / f"{dt.datetime.now():%Y%m%d-%H%M%S}-{name}"
+    bag_path = run_dir / "bag" if args.sim else None
+    graph = None
+    if args.sim:
+        from catheter_control.bringup import ProcessGraph, sim_graph_specs
+
+        # A simulated graph must never reach a real rig on the network.
+        os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+        custom = {
+            "signal": name,
+            "signal_params": repr(signal_params),
+            "hardware": "simulated thesis rig (catheter_driver sim_hardware)",
+            "compensator": "none (static inverse)",
+        }
+        run_dir.mkdir(parents=True, exist_ok=True)
+        graph = ProcessGraph(
+            sim_graph_specs(
+                bag_path, custom, compensator_params={"control_rate_hz": args.control_rate_hz}
+            ),
+            args.namespace,
+            log_dir=run_dir / "logs",
+        )
+        print(f"follow_trajectory: starting the simulated rig (logs in {run_dir / 'logs'})")
+        graph.start()
+    try:
+        return _run(args, plan, run_dir, bag_path, graph)
+    finally:
+        if graph is not None:
+            graph.stop()
+            if bag_path is not None and bag_path.exists():
+                print(f"Bag: {bag_path}")
+
+
+def _run(
+    args: argparse.Namespace,
+    plan: TrajectoryPlan,
+    run_dir: Path,
+    bag_path: Path | None,
+    graph: object,
+) -> int:
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.node import Node
+    from sensor_msgs.msg import JointState
+    from tqdm import tqdm
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+    from catheter_control import qos
+    from catheter_control.bringup import ProcessGraph
+    from catheter_control.tracking_report import TrackingError, save_json, save_plot, score_run
+    from catheter_driver.messages import angle_rad_from, ns_from_time
+    from catheter_models.contract import (
+        ANGLE_DESIRED,
+        BEND_JOINT,
+        DIAGNOSTICS,
+        TIP_ANGLE,
+        TRAJECTORY,
+    )
+
+    data = _Collected()
+    with rclpy.init(args=["follow_trajectory", "--ros-args", "-r", f"__ns:={args.namespace}"]):
+        node = Node("follow_trajectory")
+
+        def on_desired(msg: JointState) -> None:
+            data.desired.append((ns_from_time(msg.header.stamp) * 1e-9, angle_rad_from(msg)))
+
+        def on_measured(msg: JointState) -> None:
+            data.measured.append((ns_from_time(msg.header.stamp) * 1e-9, angle_rad_from(msg)))
+
+        def on_diag(msg: DiagnosticArray) -> None:
+            for status in msg.status:
+                if status.name.endswith("compensator") and status.message.startswith(
+                    "trajectory refused"
+                ):
+                    data.refusal = status.message
+
+        node.create_subscription(JointState, ANGLE_DESIRED.name, on_desired, qos.SENSOR)
+        node.create_subscription(JointState, TIP_ANGLE.name, on_measured, qos.SENSOR)
+        node.create_subscription(DiagnosticArray, DIAGNOSTICS.name, on_diag, 10)
+        pub = node.create_publisher(JointTrajectory, TRAJECTORY.name, qos.TRAJECTORY)
+
+        # Wait for the graph: measurements flowing and the compensator listening.
+        deadline = time.monotonic() + args.timeout_s
+        while time.monotonic() < deadline:
+            rclpy.spin_once(node, timeout_sec=0.1)
+            if isinstance(graph, ProcessGraph) and graph.failed():
+                dead = graph.failed()
+                for n in dead:
+                    print(f"--- {n} log ---\n{graph.log_tail(n)}", file=sys.stderr)
+                print(f"follow_trajectory: node(s) exited during start-up: {dead}", file=sys.stderr)
+                return EXIT_GRAPH
+            if data.measured and pub.get_subscription_count() >= 1:
+                break
+        else:
+            missing = []
+            if not data.measured:
+                missing.append(f"no {node.resolve_topic_name(TIP_ANGLE.name)} samples")
+            if pub.get_subscription_count() == 0:
+                missing.append(f"nobody subscribes to {node.resolve_topic_name(TRAJECTORY.name)}")
+            print(
+                f"follow_trajectory: graph not ready after {args.timeout_s:g} s: "
+                + "; ".join(missing),
+                file=sys.stderr,
+            )
+            return EXIT_GRAPH
+        if bag_path is not None:
+            # The recorder subscribes too: give it time to match before anything moves.
+            while pub.get_subscription_count() < 2 and time.monotonic() < deadline:
+                rclpy.spin_once(node, timeout_sec=0.05)
+
+        msg = JointTrajectory()
+        msg.joint_names = [BEND_JOINT]
+        for t, a in zip(plan.t_s, plan.angle_rad, strict=True):
+            point = JointTrajectoryPoint()
+            point.positions = [float(a)]
+            point.time_from_start.sec = math.floor(t)
+            point.time_from_start.nanosec = round((t - math.floor(t)) * 1e9) % 1_000_000_000
+            msg.points.append(point)
+        data.desired.clear()
+        pub.publish(msg)
+        sent_at = time.monotonic()
+        print(f"follow_trajectory: following {plan.name!r} ({plan.duration_s:.1f} s)")
+        bar = tqdm(
+            total=round(plan.duration_s, 1),
+            unit="s",
+            # None: show on a terminal only; piped output gets no stream of redraws.
+            disable=True if args.no_progress else None,
+            mininterval=0.5,
+            bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} s",
+        )
+        # Run through the trajectory and the ramp-down after it, timed from the first
+        # set-point: the compensator starts once its valve driver listens, not on receipt.
+        started_at: float | None = None
+        while started_at is None or time.monotonic() - started_at < plan.duration_s + 1.0:
+            rclpy.spin_once(node, timeout_sec=0.05)
+            now = time.monotonic()
+            if started_at is None and data.desired:
+                started_at = now
+            if started_at is not None:
+                done_s = round(min(now - started_at, plan.duration_s), 1)
+                if done_s > bar.n:
+                    bar.update(done_s - bar.n)
+            if data.refusal:
+                bar.close()
+                print(
+                    f"follow_trajectory: the compensator refused the trajectory: {data.refusal}",
+                    file=sys.stderr,
+                )
+                return EXIT_REFUSED
+            if started_at is None and now - sent_at > _START_TIMEOUT_S:
+                bar.close()
+                print(
+                    f"follow_trajectory: the compensator sent no set-points within "
+                    f"{_START_TIMEOUT_S:g} s of the trajectory",
+                    file=sys.stderr,
+                )
+                return EXIT_GRAPH
+        bar.close()
+        node.destroy_node()
+
+    start = data.desired[0][0]
+    try:
+        result = score_run(
+            [d[0] for d in data.desired],
+            [d[1] for d in data.desired],
+            [m[0] for m in data.measured],
+            [m[1] for m in data.measured],
+            window_s=(start, start + plan.duration_s),
+        )
+    except TrackingError as exc:
+        print(f"follow_trajectory: cannot score the run: {exc}", file=sys.stderr)
+        return EXIT_GRAPH
+    print(result.text(plan.name))
+    run_dir.mkdir(parents=True, exist_ok=True)
+    plot = save_plot(result, run_dir / "tracking.png", f"{plan.name}: desired vs measured")
+    save_json(
+        result, run_dir / "report.json", {"trajectory": plan.name, "bag": str(bag_path or "")}
+    )
+    print(f"Plot: {plot}")
+    print(f"Report: {run_dir / 'report.json'}")
+    return 0
+
+
+def entry() -> None:
+    """Console-script wrapper that turns the return code into the exit status."""
+    sys.exit(main())
+
+
+if __name__ == "__main__":
+    entry()

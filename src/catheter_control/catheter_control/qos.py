@@ -1,0 +1,22 @@
+"""QoS profiles of the interface contract (docs/interfaces.md)."""
+
+from __future__ import annotations
+
+from rclpy.qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+    qos_profile_sensor_data,
+)
+
+SENSOR = qos_profile_sensor_data
+"""Sensor and command streams: best effort, keep last, shallow queue."""
+
+TRAJECTORY = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
+"""``trajectory``: reliable and transient-local, so a late subscriber still gets it."""

@@ -1,0 +1,170 @@
+"""Desired-angle trajectories: validation and interpolation on the control clock (no ROS)."""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+import yaml
+
+from catheter_models.errors import SignalError
+from catheter_models.signals import check_trajectory, get_preset
+from catheter_models.units import deg_to_rad
+
+FloatArray = npt.NDArray[np.float64]
+
+_ACCEL_CHECK_RATE_HZ = 100.0
+"""Resolution at which desired acceleration is judged (10 ms), whatever the control rate."""
+
+
+@dataclass(frozen=True)
+class TrajectoryLimits:
+    """What the catheter may be asked to do.
+
+    Defaults suit the thesis's rig (about 30 deg at 3 bar, test trajectories up to about 1 Hz).
+    """
+
+    min_angle_rad: float = 0.0
+    max_angle_rad: float = deg_to_rad(35.0)
+    max_rate_rad_s: float = deg_to_rad(200.0)
+    max_accel_rad_s2: float = deg_to_rad(5000.0)
+
+
+@dataclass(frozen=True)
+class TrajectoryPlan:
+    """A validated trajectory: knot times from its start [s] and desired bend [rad]."""
+
+    t_s: FloatArray
+    angle_rad: FloatArray
+    name: str = ""
+
+    @property
+    def duration_s(self) -> float:
+        """Time of the last knot [s]."""
+        return float(self.t_s[-1])
+
+    @classmethod
+    def from_knots(
+        cls,
+        t_s: npt.ArrayLike,
+        angle_rad: npt.ArrayLike,
+        limits: TrajectoryLimits,
+        control_rate_hz: float,
+        name: str = "",
+    ) -> TrajectoryPlan:
+        """Validate knots as the controller will follow them: resampled on the control clock.
+
+        Raises:
+            SignalError: non-finite, out of range, non-increasing time, too fast or too
+                abrupt; the message names the sample and the limit.
+        """
+        t = np.asarray(t_s, dtype=float).ravel()
+        a = np.asarray(angle_rad, dtype=float).ravel()
+        if t.size == 0 or t.shape != a.shape:
+            raise SignalError(
+                f"trajectory needs matching, non-empty times and angles (got {t.size}, {a.size})"
+            )
+        for label, arr in (("time_from_start", t), ("angle", a)):
+            bad = np.flatnonzero(~np.isfinite(arr))
+            if bad.size:
+                i = int(bad[0])
+                raise SignalError(f"trajectory point {i}: {label} is {arr[i]}; it must be finite")
+        if t[0] < 0.0:
+            raise SignalError(f"trajectory point 0 has negative time_from_start {t[0]} s")
+        if t[0] > 0.0:
+            # The plan starts at rest (straight) at t = 0 and moves to the first point.
+            t = np.concatenate([[0.0], t])
+            a = np.concatenate([[limits.min_angle_rad], a])
+        if t.size == 1:
+            raise SignalError(
+                "trajectory has a single point at time_from_start 0: a step with no time to "
+                "move; give the first point a time_from_start > 0"
+            )
+        # Validate what the controller will actually be asked to follow: the knots
+        # interpolated on the control clock for range and rate. Acceleration is judged at a
+        # fixed resolution instead: a corner between linear segments is a velocity jump, and
+        # on the control grid it would read as jump * rate, so the limit would depend on it.
+        if np.all(np.diff(t) > 0.0):
+            for rate_hz, check_rate, check_accel in (
+                (control_rate_hz, limits.max_rate_rad_s, math.inf),
+                (_ACCEL_CHECK_RATE_HZ, math.inf, limits.max_accel_rad_s2),
+            ):
+                grid = np.append(np.arange(0.0, t[-1], 1.0 / rate_hz), t[-1])
+                if grid.size >= 2 and grid[-1] - grid[-2] < 0.5 / rate_hz:
+                    grid = np.delete(grid, -2)  # no sliver interval at the end
+                check_trajectory(
+                    grid,
+                    np.interp(grid, t, a),
+                    limits.max_angle_rad,
+                    check_rate,
+                    check_accel,
+                    min_angle_rad=limits.min_angle_rad,
+                )
+        else:
+            i = int(np.flatnonzero(np.diff(t) <= 0.0)[0]) + 1
+            raise SignalError(
+                f"trajectory time_from_start must increase strictly: point {i} at {t[i]} s "
+                f"follows {t[i - 1]} s"
+            )
+        return cls(t_s=t, angle_rad=a, name=name)
+
+    def desired_at(self, elapsed_s: float) -> float:
+        """Desired bend [rad] at ``elapsed_s`` from the start (held at the ends)."""
+        return float(np.interp(elapsed_s, self.t_s, self.angle_rad))
+
+
+def load_trajectory_file(path: Path) -> tuple[FloatArray, FloatArray]:
+    """Read trajectory knots from a CSV or YAML file.
+
+    CSV has columns ``t_s`` and ``angle_deg`` (or ``angle_rad``); YAML is a mapping
+    ``{t_s: [...], angle_deg: [...]}`` or a list of ``{t_s, angle_deg}``.
+
+    Returns:
+        Knot times [s] and angles [rad].
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise SignalError(f"trajectory file {path} does not exist")
+    rows: dict[str, list[float]]
+    if path.suffix.lower() in {".yaml", ".yml"}:
+        raw = yaml.safe_load(path.read_text())
+        if isinstance(raw, list):
+            rows = {k: [float(r[k]) for r in raw] for k in raw[0]} if raw else {}
+        elif isinstance(raw, dict):
+            rows = {k: [float(v) for v in vals] for k, vals in raw.items()}
+        else:
+            raise SignalError(f"{path}: expected a mapping or a list of points")
+    else:
+        with path.open(newline="") as fh:
+            reader = csv.DictReader(fh)
+            rows = {name: [] for name in reader.fieldnames or []}
+            for line_no, row in enumerate(reader, start=2):
+                for key, value in row.items():
+                    try:
+                        rows[key].append(float(value))
+                    except (TypeError, ValueError):
+                        raise SignalError(
+                            f"{path}:{line_no}: column {key!r} holds {value!r}, not a number"
+                        ) from None
+    if "t_s" not in rows:
+        raise SignalError(f"{path}: no 't_s' column/key; found {sorted(rows)}")
+    if "angle_rad" in rows:
+        angle = np.asarray(rows["angle_rad"], dtype=float)
+    elif "angle_deg" in rows:
+        angle = deg_to_rad(np.asarray(rows["angle_deg"], dtype=float))
+    else:
+        raise SignalError(f"{path}: no 'angle_deg' or 'angle_rad' column/key; found {sorted(rows)}")
+    return np.asarray(rows["t_s"], dtype=float), angle
+
+
+def preset_knots(name: str, rate_hz: float = 50.0) -> tuple[FloatArray, FloatArray]:
+    """Knots of a thesis trajectory preset (sec. 9.3), sampled at ``rate_hz``."""
+    spec = get_preset(name)
+    if spec.kind != "angle":
+        raise SignalError(f"preset {name!r} is a {spec.kind} signal, not an angle trajectory")
+    signal = spec.generate(rate_hz)
+    return signal.t_s, signal.values_si

@@ -1,0 +1,82 @@
+"""Trajectory validation: refused with a message that names the point and the limit."""
+
+import math
+
+import numpy as np
+import pytest
+
+from catheter_control.trajectory import (
+    TrajectoryLimits,
+    TrajectoryPlan,
+    load_trajectory_file,
+    preset_knots,
+)
+from catheter_models.errors import SignalError
+from catheter_models.signals import TEST_TRAJECTORIES
+
+LIM = TrajectoryLimits()
+
+
+def plan(t: list[float], a_deg: list[float]) -> TrajectoryPlan:
+    return TrajectoryPlan.from_knots(t, np.radians(a_deg), LIM, 250.0)
+
+
+@pytest.mark.parametrize("name", TEST_TRAJECTORIES)
+def test_every_thesis_trajectory_is_accepted(name: str) -> None:
+    t, a = preset_knots(name)
+    p = TrajectoryPlan.from_knots(t, a, LIM, 250.0, name)
+    assert p.duration_s > 10.0
+
+
+def test_interpolates_and_holds_at_the_ends() -> None:
+    p = plan([0.0, 1.0, 2.0], [0.0, 10.0, 10.0])
+    assert p.desired_at(0.5) == pytest.approx(math.radians(5.0))
+    assert p.desired_at(5.0) == pytest.approx(math.radians(10.0))
+
+
+def test_first_point_after_zero_starts_from_rest() -> None:
+    p = plan([1.0], [5.0])
+    assert p.desired_at(0.0) == 0.0
+    assert p.desired_at(1.0) == pytest.approx(math.radians(5.0))
+
+
+@pytest.mark.parametrize(
+    ("t", "a_deg", "words"),
+    [
+        ([0.0, 1.0, 2.0], [0.0, math.nan, 0.0], "point 1"),
+        ([0.0, 1.0, 2.0], [0.0, 50.0, 0.0], "outside the allowed"),
+        ([0.0, 1.0, 1.0], [0.0, 5.0, 5.0], "increase strictly"),
+        ([0.0, 0.05, 2.0], [0.0, 30.0, 30.0], "rate"),
+        ([0.0], [5.0], "single point"),
+        ([0.0, 1.0, 2.0], [0.0, -5.0, 0.0], "outside the allowed"),
+    ],
+)
+def test_impossible_trajectories_are_refused_by_name(
+    t: list[float], a_deg: list[float], words: str
+) -> None:
+    with pytest.raises(SignalError, match=words):
+        plan(t, a_deg)
+
+
+def test_reads_csv_and_yaml(tmp_path) -> None:
+    csv = tmp_path / "p.csv"
+    csv.write_text("t_s,angle_deg\n0,0\n1,10\n2,0\n")
+    t, a = load_trajectory_file(csv)
+    assert t.tolist() == [0, 1, 2] and np.degrees(a).tolist() == pytest.approx([0, 10, 0])
+    yml = tmp_path / "p.yaml"
+    yml.write_text("- {t_s: 0, angle_deg: 0}\n- {t_s: 2, angle_deg: 4}\n")
+    t, a = load_trajectory_file(yml)
+    assert np.degrees(a[-1]) == pytest.approx(4.0)
+
+
+def test_bad_files_name_the_problem(tmp_path) -> None:
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t_s,angle_deg\n0,0\n1,abc\n")
+    with pytest.raises(SignalError, match=r"bad.csv:3: column 'angle_deg' holds 'abc'"):
+        load_trajectory_file(bad)
+    nocol = tmp_path / "nocol.csv"
+    nocol.write_text("time,angle\n0,0\n")
+    with pytest.raises(SignalError, match="no 't_s'"):
+        load_trajectory_file(nocol)
+    with pytest.raises(SignalError, match="does not exist"):
+        load_trajectory_file(tmp_path / "missing.csv")
