@@ -162,43 +162,35 @@ class ProcessGraph:
         self.stop()
 
 
-def run_composed(specs: Sequence[NodeSpec], namespace: str) -> None:
-    """Run the nodes in this process on one multi-threaded executor until Ctrl-C."""
+def run_composed(specs: Sequence[NodeSpec], namespace: str) -> int:
+    """Run the nodes in this process on one executor until SIGINT/SIGTERM; returns exit code.
+
+    Separate processes are the default: with the GIL, one Python process shares one core
+    between every node's loop and callbacks.
+    """
     import importlib
     import tempfile
 
-    import rclpy
     import yaml
-    from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+
+    from catheter_driver.node_main import run_nodes
 
     # Per-node parameters in one process need a params file keyed by the node's full name.
     ns = namespace.rstrip("/")
     params = {f"{ns}/{spec.name}": {"ros__parameters": dict(spec.params)} for spec in specs}
     with tempfile.NamedTemporaryFile("w", suffix=".yaml", delete=False) as fh:
         yaml.safe_dump(params, fh)
-    argv = ["--ros-args", "-r", f"__ns:={namespace}", "--params-file", fh.name]
-    nodes = []
+    argv = ["bringup", "--ros-args", "-r", f"__ns:={namespace}", "--params-file", fh.name]
+    factories = []
+    for spec in specs:
+        module = importlib.import_module(spec.module)
+        factories.append(
+            next(getattr(module, n) for n in dir(module) if n.endswith("Node") and n != "Node")
+        )
     try:
-        with rclpy.init(args=["bringup", *argv]):
-            executor = MultiThreadedExecutor()
-            for spec in specs:
-                module = importlib.import_module(spec.module)
-                node_cls = next(
-                    getattr(module, n) for n in dir(module) if n.endswith("Node") and n != "Node"
-                )
-                node = node_cls()
-                nodes.append(node)
-                executor.add_node(node)
-            for node in nodes:
-                if hasattr(node, "start"):
-                    node.start()
-            executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        return run_nodes(factories, argv)
     finally:
-        for node in reversed(nodes):
-            if hasattr(node, "close"):
-                node.close()
+        Path(fh.name).unlink(missing_ok=True)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -224,7 +216,9 @@ def main(argv: list[str] | None = None) -> None:
         args.bag, {"source": "bringup"}, sim_params, with_compensator=not args.no_compensator
     )
     if args.compose:
-        run_composed(specs, args.namespace)
+        code = run_composed(specs, args.namespace)
+        if code:
+            raise SystemExit(code)
         return
     graph = ProcessGraph(specs, args.namespace)
     graph.start()

@@ -160,8 +160,8 @@ def _run(
                 ):
                     data.refusal = status.message
 
-        node.create_subscription(JointState, ANGLE_DESIRED.name, on_desired, qos.SENSOR)
-        node.create_subscription(JointState, TIP_ANGLE.name, on_measured, qos.SENSOR)
+        node.create_subscription(JointState, ANGLE_DESIRED.name, on_desired, qos.KEEP_EVERY_SAMPLE)
+        node.create_subscription(JointState, TIP_ANGLE.name, on_measured, qos.KEEP_EVERY_SAMPLE)
         node.create_subscription(DiagnosticArray, DIAGNOSTICS.name, on_diag, 10)
         pub = node.create_publisher(JointTrajectory, TRAJECTORY.name, qos.TRAJECTORY)
 

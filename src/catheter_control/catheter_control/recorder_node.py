@@ -13,7 +13,6 @@ from pathlib import Path
 from typing import Any
 
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.subscription import Subscription
 
 from catheter_control import qos
@@ -25,20 +24,6 @@ from catheter_models import __version__
 from catheter_models.bag import LATCHED_QOS, SENSOR_DATA_QOS, BagRecorder
 from catheter_models.contract import RECORDED_TOPICS, TRAJECTORY, TopicSpec
 from catheter_models.errors import ParameterError
-
-_RECORD_STREAM = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=500,
-    reliability=ReliabilityPolicy.BEST_EFFORT,
-    durability=DurabilityPolicy.VOLATILE,
-)
-"""The contract's best-effort streams with a deep queue (2 s at 250 Hz) on the recorder's side.
-
-A subscriber's depth is its own business (it does not affect matching), and a controller
-wants only the newest sample, but a recorder must keep every one: a rig that falls behind
-publishes its backlog in a burst, and this process may itself be descheduled for a moment;
-``qos_profile_sensor_data``'s depth of 5 (20 ms) lost runs of samples from the bag then.
-"""
 
 
 class RecorderNode(Node):
@@ -93,7 +78,7 @@ class RecorderNode(Node):
             self.writer.write(topic, data, now_ns, now_ns)
             self.counts[topic] += 1
 
-        profile = qos.TRAJECTORY if latched else _RECORD_STREAM
+        profile = qos.TRAJECTORY if latched else qos.KEEP_EVERY_SAMPLE
         self._subscriptions_by_topic[topic] = self.create_subscription(
             message_class(spec.msgtype), spec.name, on_message, profile, raw=True
         )
