@@ -112,12 +112,16 @@ class ProcessGraph:
             if self.log_dir is not None:
                 self.log_dir.mkdir(parents=True, exist_ok=True)
                 out = (self.log_dir / f"{spec.name}.log").open("wb")
-            self.procs[spec.name] = subprocess.Popen(
-                spec.argv(self.namespace),
-                stdout=out,
-                stderr=subprocess.STDOUT if out else None,
-                env=self.env,
-            )
+            try:
+                self.procs[spec.name] = subprocess.Popen(
+                    spec.argv(self.namespace),
+                    stdout=out,
+                    stderr=subprocess.STDOUT if out else None,
+                    env=self.env,
+                )
+            finally:
+                if out is not None:
+                    out.close()  # the child has its own descriptor
 
     def failed(self) -> dict[str, int]:
         """Nodes that have exited already, with their exit codes."""

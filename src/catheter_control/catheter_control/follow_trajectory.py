@@ -41,6 +41,7 @@ class _Collected:
     desired: list[tuple[float, float]] = field(default_factory=list)
     measured: list[tuple[float, float]] = field(default_factory=list)
     refusal: str = ""
+    recorder: dict[str, str] = field(default_factory=dict)
 
 
 def _parse(argv: list[str] | None) -> argparse.Namespace:
@@ -139,6 +140,8 @@ def _run(
         ANGLE_DESIRED,
         BEND_JOINT,
         DIAGNOSTICS,
+        PRESSURE_COMMAND,
+        PRESSURE_MEASURED,
         TIP_ANGLE,
         TRAJECTORY,
     )
@@ -159,6 +162,8 @@ def _run(
                     "trajectory refused"
                 ):
                     data.refusal = status.message
+                if status.name.endswith("recorder"):
+                    data.recorder = {kv.key: kv.value for kv in status.values}
 
         node.create_subscription(JointState, ANGLE_DESIRED.name, on_desired, qos.KEEP_EVERY_SAMPLE)
         node.create_subscription(JointState, TIP_ANGLE.name, on_measured, qos.KEEP_EVERY_SAMPLE)
@@ -190,9 +195,27 @@ def _run(
             )
             return EXIT_GRAPH
         if bag_path is not None:
-            # The recorder subscribes too: give it time to match before anything moves.
-            while pub.get_subscription_count() < 2 and time.monotonic() < deadline:
+            # Discovery is pairwise: that we see the recorder does not mean it has matched
+            # the compensator. Wait until it reports a publisher on every stream, or the bag
+            # would miss the start of the run.
+            streams = [
+                node.resolve_topic_name(t.name)
+                for t in (PRESSURE_COMMAND, ANGLE_DESIRED, TIP_ANGLE, PRESSURE_MEASURED)
+            ]
+
+            def unheard() -> list[str]:
+                return [t for t in streams if int(data.recorder.get(f"publishers {t}", "0")) < 1]
+
+            while unheard() and time.monotonic() < deadline:
                 rclpy.spin_once(node, timeout_sec=0.05)
+            if unheard():
+                print(
+                    "follow_trajectory: the recorder hears no publisher on "
+                    + ", ".join(unheard())
+                    + f" after {args.timeout_s:g} s",
+                    file=sys.stderr,
+                )
+                return EXIT_GRAPH
 
         msg = JointTrajectory()
         msg.joint_names = [BEND_JOINT]

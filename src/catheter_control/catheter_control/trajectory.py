@@ -13,7 +13,7 @@ import yaml
 
 from catheter_models.errors import SignalError
 from catheter_models.signals import check_trajectory, get_preset
-from catheter_models.units import deg_to_rad
+from catheter_models.units import deg_to_rad, rad_to_deg
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -73,6 +73,16 @@ class TrajectoryPlan:
             if bad.size:
                 i = int(bad[0])
                 raise SignalError(f"trajectory point {i}: {label} is {arr[i]}; it must be finite")
+        # Name the user's own point when a knot is out of range; the grid checks below
+        # would name a resampled sample the user never wrote.
+        outside = np.flatnonzero((a < limits.min_angle_rad) | (a > limits.max_angle_rad))
+        if outside.size:
+            i = int(outside[0])
+            raise SignalError(
+                f"trajectory point {i} (t = {t[i]:g} s) asks for {rad_to_deg(a[i]):.4g} deg, "
+                f"outside the allowed [{rad_to_deg(limits.min_angle_rad):.4g}, "
+                f"{rad_to_deg(limits.max_angle_rad):.4g}] deg"
+            )
         if t[0] < 0.0:
             raise SignalError(f"trajectory point 0 has negative time_from_start {t[0]} s")
         if t[0] > 0.0:

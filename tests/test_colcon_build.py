@@ -1,0 +1,133 @@
+"""``colcon build`` of a scratch copy of ros2_ws installs what ``ros2 run`` needs: every console
+script under ``lib/<package>/``, the ament index entries, and a working installed entry point."""
+
+from __future__ import annotations
+
+import ast
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.slow
+
+REPO = Path(__file__).resolve().parents[1]
+PACKAGES = ("catheter_models", "catheter_driver", "catheter_control")
+VENV_BIN = Path(sys.executable).parent
+IGNORE = shutil.ignore_patterns("__pycache__", "*.egg-info", "build", "install", "log")
+
+
+def console_scripts(setup_py: Path) -> dict[str, str]:
+    """``console_scripts`` of a setup.py, read with ``ast`` (name -> ``module:function``)."""
+    tree = ast.parse(setup_py.read_text())
+    for node in ast.walk(tree):
+        if isinstance(node, ast.keyword) and node.arg == "entry_points":
+            entry_points = ast.literal_eval(node.value)
+            scripts = {}
+            for spec in entry_points.get("console_scripts", []):
+                name, _, target = spec.partition("=")
+                scripts[name.strip()] = target.strip()
+            return scripts
+    raise AssertionError(f"{setup_py} has no entry_points")
+
+
+def _site_packages(install: Path) -> list[str]:
+    found = sorted(str(p) for p in install.glob("*/lib/python3*/site-packages"))
+    assert len(found) == len(PACKAGES), found
+    return found
+
+
+def test_colcon_build_installs_every_executable(tmp_path: Path) -> None:
+    # A scratch copy of the workspace: ros2_ws/src is a symlink to ../src, so copy the real
+    # packages under the copy's src/ (without build products of the checkout).
+    ws = tmp_path / "ros2_ws"
+    shutil.copytree(REPO / "ros2_ws", ws, symlinks=True, ignore=IGNORE)
+    if (ws / "src").is_symlink():
+        (ws / "src").unlink()
+    (ws / "src").mkdir(exist_ok=True)
+    for pkg in PACKAGES:
+        shutil.copytree(REPO / "src" / pkg, ws / "src" / pkg, ignore=IGNORE)
+
+    env = {
+        **os.environ,
+        "PATH": f"{VENV_BIN}{os.pathsep}{os.environ.get('PATH', '')}",
+        "COLCON_HOME": str(tmp_path / "colcon_home"),  # no user defaults
+    }
+    env.pop("AMENT_PREFIX_PATH", None)
+    env.pop("COLCON_PREFIX_PATH", None)
+    try:
+        build = subprocess.run(
+            [str(VENV_BIN / "colcon"), "build", "--event-handlers", "console_direct-"],
+            cwd=ws,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=180.0,
+            check=False,
+        )
+    except subprocess.TimeoutExpired as exc:
+        raise AssertionError(f"colcon build took over 180 s:\n{exc.stdout}\n{exc.stderr}") from None
+    assert build.returncode == 0, f"{build.stdout}\n{build.stderr}"
+    assert "3 packages finished" in build.stdout, build.stdout
+
+    install = ws / "install"
+    for pkg in PACKAGES:
+        scripts = console_scripts(ws / "src" / pkg / "setup.py")
+        assert scripts, f"{pkg} declares no console scripts"
+        lib = install / pkg / "lib" / pkg
+        for name in scripts:
+            exe = lib / name
+            assert exe.is_file(), f"{pkg}: {name} not installed in {lib}: {sorted(lib.iterdir())}"
+            assert os.access(exe, os.X_OK), f"{exe} is not executable"
+
+    # What `ros2 run` does: find each package through the ament index.
+    site_packages = _site_packages(install)
+    run_env = {
+        **env,
+        "AMENT_PREFIX_PATH": os.pathsep.join(str(install / pkg) for pkg in PACKAGES),
+        "PYTHONPATH": os.pathsep.join(site_packages),
+    }
+    probe = (
+        "import json, sys\n"
+        "from ament_index_python.packages import get_package_prefix, "
+        "get_package_share_directory\n"
+        "import catheter_control.models as models\n"
+        "out = {p: [get_package_prefix(p), get_package_share_directory(p)] for p in sys.argv[1:]}\n"
+        "models.load_compensator('none', '')\n"
+        "out['models_file'] = models.__file__\n"
+        "print(json.dumps(out))\n"
+    )
+    found = subprocess.run(
+        [sys.executable, "-c", probe, *PACKAGES],
+        env=run_env,
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=60.0,
+        check=False,
+    )
+    assert found.returncode == 0, found.stderr
+    located = json.loads(found.stdout.strip().splitlines()[-1])
+    for pkg in PACKAGES:
+        prefix, share = (Path(p) for p in located[pkg])
+        assert prefix == install / pkg
+        assert (share / "package.xml").is_file(), f"{share} has no package.xml"
+    # The installed packages (not the checkout) were imported, with the shipped model inside.
+    assert Path(located["models_file"]).is_relative_to(install), located["models_file"]
+
+    # An installed entry point runs from the install alone.
+    effects = subprocess.run(
+        [str(install / "catheter_models" / "lib" / "catheter_models" / "catheter-lab"), "effects"],
+        env=run_env,
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=60.0,
+        check=False,
+    )
+    assert effects.returncode == 0, f"{effects.stdout}\n{effects.stderr}"
+    assert "pneumatic_lag" in effects.stdout, effects.stdout
