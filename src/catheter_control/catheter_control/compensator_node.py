@@ -11,7 +11,6 @@ from __future__ import annotations
 import threading
 import time
 
-from rclpy.node import Node
 from sensor_msgs.msg import FluidPressure, JointState
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
@@ -21,9 +20,9 @@ from catheter_control.control_core import ControlCore
 from catheter_control.models import COMPENSATORS, load_compensator
 from catheter_control.trajectory import TrajectoryLimits, TrajectoryPlan
 from catheter_driver import diagnostics, messages
+from catheter_driver.loop_node import LoopNode
 from catheter_driver.node_main import run_node
 from catheter_driver.params import declare_float, declare_plain
-from catheter_driver.rt_loop import DeadlineLoop
 from catheter_models import __version__
 from catheter_models.contract import ANGLE_DESIRED, BEND_JOINT, PRESSURE_COMMAND, TRAJECTORY
 from catheter_models.errors import CatheterError, ParameterError
@@ -47,7 +46,7 @@ _WAIT = ParamSpec(
 _AMB = ParamSpec("ambient_pressure_pa", AMBIENT_PRESSURE_PA, 5.0e4, 1.2e5, "ambient pressure [Pa]")
 
 
-class CompensatorNode(Node):
+class CompensatorNode(LoopNode):
     """Thin ROS shell over :class:`ControlCore`."""
 
     def __init__(self) -> None:
@@ -87,26 +86,8 @@ class CompensatorNode(Node):
         )
         self.create_service(Trigger, "~/stop", self._on_stop)
         self.create_timer(1.0, self._publish_diagnostics)
-        self._mono_t0 = time.monotonic()
-        self._ros_t0_ns = self.get_clock().now().nanoseconds
-        self._loop = DeadlineLoop(self.rate_hz, self._tick, name="compensator")
+        self.create_loop(self.rate_hz, self._tick)
         self.get_logger().info(f"compensator {kind!r} at {self.rate_hz:g} Hz")
-
-    def start(self) -> None:
-        """Start the control loop."""
-        self._loop.start()
-
-    def destroy_node(self) -> None:
-        """Stop the loop before the publishers go away."""
-        # A constructor that failed (a parameter refused) left no loop, but rclpy still
-        # destroys the half-built node when its context shuts down.
-        loop = getattr(self, "_loop", None)
-        if loop is not None:
-            loop.stop()
-        super().destroy_node()
-
-    def _stamp_ns(self, mono_s: float) -> int:
-        return self._ros_t0_ns + round((mono_s - self._mono_t0) * 1e9)
 
     def _refuse(self, reason: str) -> None:
         with self._lock:
@@ -163,25 +144,25 @@ class CompensatorNode(Node):
                         f"no valve driver subscribes to "
                         f"{self._pub_cmd.topic_name} after {self.driver_wait_s:g} s"
                     )
-            out = self.core.tick(deadline_s, self._loop.period_s)
+            out = self.core.tick(deadline_s, self.loop.period_s)
         if refusal:
             self._refuse(refusal)
         if out is None:
             return
-        stamp_ns = self._stamp_ns(deadline_s)
+        stamp_ns = self.stamp_ns(deadline_s)
         self._pub_cmd.publish(
             messages.fluid_pressure(out.pressure_pa, stamp_ns, "", self.ambient_pa)
         )
         self._pub_des.publish(messages.joint_state(out.angle_desired_rad, stamp_ns))
 
     def _publish_diagnostics(self) -> None:
-        stats = self._loop.stats()
+        stats = self.loop.stats()
         with self._lock:
             refusals, last, accepted = self._refusals, self._last_refusal, self._accepted
             state, bad_model = self.core.state, self.core.nonfinite_from_compensator
         level, message = diagnostics.OK, state
-        if self._loop.error is not None:
-            level, message = diagnostics.ERROR, f"control loop died: {self._loop.error!r}"
+        if self.loop.error is not None:
+            level, message = diagnostics.ERROR, f"control loop died: {self.loop.error!r}"
         elif bad_model:
             level, message = (
                 diagnostics.ERROR,

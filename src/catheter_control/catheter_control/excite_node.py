@@ -13,14 +13,13 @@ import time
 
 import numpy as np
 import rclpy
-from rclpy.node import Node
 from sensor_msgs.msg import FluidPressure
 
 from catheter_control import qos
 from catheter_driver import diagnostics, messages
+from catheter_driver.loop_node import LoopNode
 from catheter_driver.node_main import run_node
 from catheter_driver.params import declare_float, declare_plain
-from catheter_driver.rt_loop import DeadlineLoop
 from catheter_models.contract import PRESSURE_COMMAND
 from catheter_models.errors import SignalError
 from catheter_models.plant.config import ParamSpec
@@ -43,7 +42,7 @@ _LINGER_S = 0.5
 _AMB = ParamSpec("ambient_pressure_pa", AMBIENT_PRESSURE_PA, 5.0e4, 1.2e5, "ambient pressure [Pa]")
 
 
-class ExciteNode(Node):
+class ExciteNode(LoopNode):
     """Publishes a whole pressure signal, then signals ``done``."""
 
     def __init__(self) -> None:
@@ -92,10 +91,9 @@ class ExciteNode(Node):
         self._pub = self.create_publisher(FluidPressure, PRESSURE_COMMAND.name, qos.SENSOR)
         self._pub_diag = diagnostics.create_diagnostics_publisher(self)
         self._first_k: int | None = None
-        self._ros_minus_mono_ns = 0
         self._wait_until_s = 0.0
         self.failure = ""
-        self._loop = DeadlineLoop(self.rate_hz, self._tick, name="excite")
+        self.create_loop(self.rate_hz, self._tick)
         self.get_logger().info(
             f"signal {name!r} ({len(specs)} part(s)): {self.values_pa.size / self.rate_hz:.1f} s "
             f"at {self.rate_hz:g} Hz, peak {self.values_pa.max() / 1e5:.2f} bar"
@@ -104,16 +102,13 @@ class ExciteNode(Node):
     def start(self) -> None:
         """Start the loop; sending begins once something listens on the command topic."""
         self._wait_until_s = time.monotonic() + self.wait_s
-        self._loop.start()
+        super().start()
 
     def _tick(self, k: int, deadline_s: float) -> None:
         if self._first_k is None:
             # Commands into the void are not data acquisition: wait for the rig to listen.
             if self._pub.get_subscription_count() > 0:
                 self._first_k = k
-                self._ros_minus_mono_ns = self.get_clock().now().nanoseconds - round(
-                    time.monotonic() * 1e9
-                )
             elif deadline_s > self._wait_until_s:
                 self.failure = (
                     f"nobody subscribes to {self.resolve_topic_name(PRESSURE_COMMAND.name)} "
@@ -125,14 +120,14 @@ class ExciteNode(Node):
         if i >= self.values_pa.size:
             self.done.set()
             return
-        stamp_ns = self._ros_minus_mono_ns + round(deadline_s * 1e9)
+        stamp_ns = self.stamp_ns(deadline_s)
         self._pub.publish(
             messages.fluid_pressure(float(self.values_pa[i]), stamp_ns, "", self.ambient_pa)
         )
 
     def close(self) -> None:
         """Stop sending (idempotent)."""
-        self._loop.stop()
+        self.loop.stop()
 
 
 def main(args: list[str] | None = None) -> None:

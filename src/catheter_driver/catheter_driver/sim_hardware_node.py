@@ -10,14 +10,13 @@ from __future__ import annotations
 
 import time
 
-from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import FluidPressure, JointState, Range
 
 from catheter_driver import diagnostics, messages
+from catheter_driver.loop_node import LoopNode
 from catheter_driver.node_main import run_node
 from catheter_driver.params import declare_float, declare_int, declare_plain
-from catheter_driver.rt_loop import DeadlineLoop
 from catheter_driver.sim_hardware import SimHardware
 from catheter_models import __version__
 from catheter_models.contract import PRESSURE_COMMAND, PRESSURE_MEASURED, TIP_ANGLE, TIP_DISTANCE
@@ -31,7 +30,7 @@ _TIMEOUT = ParamSpec(
 )
 
 
-class SimHardwareNode(Node):
+class SimHardwareNode(LoopNode):
     """Thin ROS shell over :class:`SimHardware`."""
 
     def __init__(self) -> None:
@@ -75,27 +74,13 @@ class SimHardwareNode(Node):
             FluidPressure, PRESSURE_COMMAND.name, self._on_command, qos_profile_sensor_data
         )
         self.hw.plant.warm_up()
-        self._ros_minus_mono_ns: int | None = None
         self._samples_done = 0
-        self._loop = DeadlineLoop(rig["sample_rate_hz"], self._tick, name="sim_hardware")
+        self.create_loop(rig["sample_rate_hz"], self._tick)
         self.create_timer(1.0, self._publish_diagnostics)
         on = [n for n in EFFECTS if config.enabled(n)]
         self.get_logger().info(
             f"simulated rig at {rig['sample_rate_hz']:g} Hz, effects on: {', '.join(on) or 'none'}"
         )
-
-    def start(self) -> None:
-        """Start publishing sensor samples."""
-        self._loop.start()
-
-    def destroy_node(self) -> None:
-        """Stop the sample loop before the publishers go away."""
-        # A constructor that failed (a parameter refused) left no loop, but rclpy still
-        # destroys the half-built node when its context shuts down.
-        loop = getattr(self, "_loop", None)
-        if loop is not None:
-            loop.stop()
-        super().destroy_node()
 
     def _on_command(self, msg: FluidPressure) -> None:
         gauge_pa = messages.gauge_pa_from(msg, self.ambient_pa)
@@ -103,20 +88,16 @@ class SimHardwareNode(Node):
             self.get_logger().warning(self.hw.last_refusal, throttle_duration_sec=1.0)
 
     def _tick(self, k: int, deadline_s: float) -> None:
-        if self._ros_minus_mono_ns is None:
-            self._ros_minus_mono_ns = self.get_clock().now().nanoseconds - round(
-                time.monotonic() * 1e9
-            )
         # The rig samples whether or not this thread ran on time: after an overrun, step
         # through every missed sample and publish the backlog with its true stamps, as a
         # sensor driver drains its buffer. Stamps are the sampling instants (monotonic
         # deadlines mapped to ROS time), so bags align across nodes.
-        period_s = self._loop.period_s
+        period_s = self.loop.period_s
         while self._samples_done < k:
             self._samples_done += 1
             sample_time_s = deadline_s - (k - self._samples_done) * period_s
             sample = self.hw.step(sample_time_s)
-            stamp_ns = self._ros_minus_mono_ns + round(sample_time_s * 1e9)
+            stamp_ns = self.stamp_ns(sample_time_s)
             self._pub_pressure.publish(
                 messages.fluid_pressure(sample.pressure_measured_pa, stamp_ns, "", self.ambient_pa)
             )
@@ -127,11 +108,11 @@ class SimHardwareNode(Node):
 
     def _publish_diagnostics(self) -> None:
         counters = self.hw.counters()
-        stats = self._loop.stats()
+        stats = self.loop.stats()
         level = diagnostics.OK
         message = "running"
-        if self._loop.error is not None:
-            level, message = diagnostics.ERROR, f"sample loop died: {self._loop.error!r}"
+        if self.loop.error is not None:
+            level, message = diagnostics.ERROR, f"sample loop died: {self.loop.error!r}"
         elif self.hw.venting:
             level, message = diagnostics.WARN, "watchdog: no pressure command, valve vented"
         elif counters.refused_nonfinite:
