@@ -27,6 +27,8 @@ setup(
     entry_points={
         "console_scripts": [
             "sim_hardware = catheter_driver.sim_hardware_node:main",
+            "valve_driver = catheter_driver.valve_driver_node:main",
+            "laser_angle = catheter_driver.laser_angle_node:main",
         ],
     },
 )

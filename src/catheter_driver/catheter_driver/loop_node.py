@@ -2,26 +2,24 @@
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 
 from rclpy.node import Node
 
-from catheter_driver.rt_loop import DeadlineLoop
+from catheter_driver.rt_loop import DeadlineLoop, MonotonicStamper
 
 
 class LoopNode(Node):
     """Base for nodes whose work runs on a :class:`DeadlineLoop` (not an rclpy timer).
 
-    Deadlines are on the monotonic clock; messages are stamped in ROS time. The offset
-    between the two is taken once, at construction, so stamps of consecutive ticks are
-    exactly one period apart whatever the system clock does meanwhile.
+    Deadlines are on the monotonic clock; messages are stamped in ROS time through one
+    :class:`MonotonicStamper` taken at construction.
     """
 
     def __init__(self, name: str) -> None:
         super().__init__(name)
         self._loop: DeadlineLoop | None = None
-        self._ros_minus_mono_ns = self.get_clock().now().nanoseconds - round(time.monotonic() * 1e9)
+        self._stamper = MonotonicStamper(self.get_clock().now().nanoseconds)
 
     def create_loop(self, rate_hz: float, tick: Callable[[int, float], None]) -> DeadlineLoop:
         """Create the node's loop (started by :meth:`start`)."""
@@ -37,7 +35,7 @@ class LoopNode(Node):
 
     def stamp_ns(self, mono_s: float) -> int:
         """ROS time [ns] of a monotonic instant [s], e.g. a tick's deadline."""
-        return self._ros_minus_mono_ns + round(mono_s * 1e9)
+        return self._stamper.ns(mono_s)
 
     def start(self) -> None:
         """Start the loop."""

@@ -25,7 +25,7 @@ def declare_float(node: Node, name: str, spec: ParamSpec, read_only: bool = True
         floating_point_range=[FloatingPointRange(from_value=spec.low, to_value=spec.high)],
     )
     try:
-        value: float = node.declare_parameter(name, float(spec.default), descriptor).value
+        value: float = _declare(node, name, float(spec.default), descriptor)
     except InvalidParameterValueException as exc:
         raise ParameterError(
             f"parameter {name!r} refused: must lie in [{spec.low:g}, {spec.high:g}] "
@@ -44,7 +44,7 @@ def declare_int(
         integer_range=[IntegerRange(from_value=low, to_value=high, step=1)],
     )
     try:
-        value = int(node.declare_parameter(name, default, descriptor).value)
+        value = int(_declare(node, name, default, descriptor))
     except InvalidParameterValueException as exc:
         raise ParameterError(
             f"parameter {name!r} refused: must lie in [{low}, {high}] ({doc}); rclpy said: {exc}"
@@ -55,4 +55,17 @@ def declare_int(
 def declare_plain(node: Node, name: str, default: Any, doc: str, read_only: bool = True) -> Any:
     """Declare a bool or string parameter (no range) and return its value."""
     descriptor = ParameterDescriptor(description=doc, read_only=read_only)
+    return _declare(node, name, default, descriptor)
+
+
+def _declare(node: Node, name: str, default: Any, descriptor: ParameterDescriptor) -> Any:
+    """Declare, or adopt a parameter the node already declared from a command-line override.
+
+    Driver nodes accept arbitrary ``<device>.*`` options, so they let rclpy declare every
+    override automatically; a named parameter given on the command line then exists before
+    we declare it. Its value is still checked against the range by the caller.
+    """
+    if node.has_parameter(name):
+        value = node.get_parameter(name).value
+        return default if value is None else value
     return node.declare_parameter(name, default, descriptor).value

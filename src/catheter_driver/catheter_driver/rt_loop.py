@@ -117,3 +117,21 @@ class DeadlineLoop:
             compute_p50_s=float(np.percentile(comp, 50)),
             compute_p99_s=float(np.percentile(comp, 99)),
         )
+
+
+class MonotonicStamper:
+    """ROS stamps for instants on the monotonic clock (deadlines, receive times).
+
+    The offset between the two clocks is taken once, so instants one period apart get
+    stamps exactly one period apart whatever the system clock does meanwhile.
+
+    Args:
+        ros_now_ns: the ROS clock's current time [ns] (``node.get_clock().now().nanoseconds``).
+    """
+
+    def __init__(self, ros_now_ns: int) -> None:
+        self._offset_ns = ros_now_ns - round(time.monotonic() * 1e9)
+
+    def ns(self, mono_s: float) -> int:
+        """ROS time [ns] of the monotonic instant ``mono_s`` [s]."""
+        return self._offset_ns + round(mono_s * 1e9)

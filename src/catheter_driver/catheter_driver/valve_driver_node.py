@@ -1,0 +1,272 @@
+"""``valve_driver``: the proportional valve and the line pressure transmitter on the real rig.
+
+Lifecycle-managed. *configure* opens both devices (backends and options from the
+``valve.*`` and ``transmitter.*`` parameters); *activate* starts the control loop (watchdog,
+clamp, slew, set-point write, at ``rate_hz``) and the transmitter poll, which publishes
+``pressure/measured``; *deactivate*, *cleanup*, *shutdown* and *error* leave the valve vented.
+With ``autostart`` (default) the node configures and activates itself, retrying until the
+devices answer.
+
+Subscribes ``pressure/command``. Services ``~/vent`` (std_srvs/Trigger) and ``~/enable``
+(std_srvs/SetBool). Health, device counters and the reason for any venting on
+``/diagnostics``.
+"""
+
+from __future__ import annotations
+
+import time
+
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import FluidPressure
+from std_srvs.srv import SetBool, Trigger
+
+from catheter_driver import diagnostics, messages
+from catheter_driver.devices.factory import make_transmitter, make_valve
+from catheter_driver.lifecycle_util import device_options
+from catheter_driver.node_main import run_node
+from catheter_driver.params import declare_float, declare_plain
+from catheter_driver.rt_loop import DeadlineLoop, MonotonicStamper
+from catheter_driver.valve_core import ValveDriverCore
+from catheter_models import __version__
+from catheter_models.contract import PRESSURE_COMMAND, PRESSURE_MEASURED
+from catheter_models.errors import CatheterError
+from catheter_models.plant.config import ParamSpec
+from catheter_models.units import AMBIENT_PRESSURE_PA
+
+_RATE = ParamSpec("rate_hz", 250.0, 10.0, 2000.0, "control loop and transmitter poll rate [Hz]")
+_PMIN = ParamSpec("min_pressure_pa", 0.0, 0.0, 6.0e5, "lowest set-point, gauge [Pa]")
+_PMAX = ParamSpec("max_pressure_pa", 3.0e5, 0.0, 6.0e5, "highest set-point, gauge [Pa]")
+_SLEW = ParamSpec("max_slew_pa_per_s", 20.0e5, 1.0e3, 1.0e8, "set-point slew limit [Pa/s]")
+_WATCHDOG = ParamSpec("watchdog_s", 0.1, 0.01, 5.0, "vent when commands stop this long [s]")
+_RECONNECT = ParamSpec("reconnect_period_s", 1.0, 0.05, 60.0, "retry a lost device this often [s]")
+_AMB = ParamSpec("ambient_pressure_pa", AMBIENT_PRESSURE_PA, 5.0e4, 1.2e5, "ambient pressure [Pa]")
+
+
+class ValveDriverNode(LifecycleNode):
+    """Thin lifecycle shell over :class:`ValveDriverCore`."""
+
+    def __init__(self) -> None:
+        super().__init__("valve_driver", automatically_declare_parameters_from_overrides=True)
+        self.rate_hz = declare_float(self, "rate_hz", _RATE)
+        self.ambient_pa = declare_float(self, "ambient_pressure_pa", _AMB)
+        self.autostart = bool(declare_plain(self, "autostart", True, "configure+activate at start"))
+        self.allow_enable = bool(
+            declare_plain(self, "allow_enable_service", True, "offer ~/enable (it re-arms motion)")
+        )
+        self.limits = {
+            "min_pressure_pa": declare_float(self, "min_pressure_pa", _PMIN),
+            "max_pressure_pa": declare_float(self, "max_pressure_pa", _PMAX),
+            "max_slew_pa_per_s": declare_float(self, "max_slew_pa_per_s", _SLEW),
+            "watchdog_s": declare_float(self, "watchdog_s", _WATCHDOG),
+            "reconnect_period_s": declare_float(self, "reconnect_period_s", _RECONNECT),
+        }
+        self.core: ValveDriverCore | None = None
+        self._loops: list[DeadlineLoop] = []
+        self._stamper = MonotonicStamper(self.get_clock().now().nanoseconds)
+        self._last_tick_state = "unconfigured"
+        self._last_reason = "not configured"
+        self._pub_measured = self.create_publisher(
+            FluidPressure, PRESSURE_MEASURED.name, qos_profile_sensor_data
+        )
+        self._pub_diag = diagnostics.create_diagnostics_publisher(self)
+        self.create_subscription(
+            FluidPressure, PRESSURE_COMMAND.name, self._on_command, qos_profile_sensor_data
+        )
+        self.create_service(Trigger, "~/vent", self._on_vent)
+        if self.allow_enable:
+            self.create_service(SetBool, "~/enable", self._on_enable)
+        self.create_timer(1.0, self._publish_diagnostics)
+        if self.autostart:
+            # Keep trying: a driver started before its devices are plugged in comes up when
+            # they appear, without a lifecycle manager.
+            self._autostart_timer = self.create_timer(
+                self.limits["reconnect_period_s"], self._try_autostart
+            )
+            self._try_autostart()
+
+    def _try_autostart(self) -> None:
+        if self.core is None:
+            self.trigger_configure()
+        if self.core is not None and not self._loops:
+            self.trigger_activate()
+        if self._loops:
+            self._autostart_timer.cancel()
+
+    # -- lifecycle -----------------------------------------------------------------------
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Build and open both devices; failure leaves the node unconfigured, with the reason."""
+        try:
+            valve_backend, valve_opts = device_options(self, "valve")
+            tx_backend, tx_opts = device_options(self, "transmitter")
+            core = ValveDriverCore(
+                make_valve(valve_backend, **valve_opts),
+                make_transmitter(tx_backend, **tx_opts),
+                **self.limits,
+            )
+        except (CatheterError, ValueError, TypeError) as exc:
+            self._fail(f"configure failed: {exc}")
+            return TransitionCallbackReturn.FAILURE
+        now = time.monotonic()
+        if not core.valve.ensure(now) or not core.transmitter.ensure(now):
+            self._fail(f"configure failed: {core.valve.error or core.transmitter.error}")
+            core.close()
+            return TransitionCallbackReturn.FAILURE
+        self.core = core
+        self._last_tick_state, self._last_reason = "inactive", "configured, not active"
+        self.get_logger().info(
+            f"valve {core.valve.device.describe()}, transmitter "
+            f"{core.transmitter.device.describe()}"
+        )
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Start the control loop and the transmitter poll."""
+        self._loops = [
+            DeadlineLoop(self.rate_hz, self._control_tick, name="valve_control"),
+            DeadlineLoop(self.rate_hz, self._poll_tick, name="transmitter_poll"),
+        ]
+        for loop in self._loops:
+            loop.start()
+        return super().on_activate(state)
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Stop the loops and vent."""
+        self._stop_loops_and_vent("deactivated")
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Vent and close the devices."""
+        self._close("cleaned up")
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Vent and close the devices."""
+        self._close("shut down")
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Whatever went wrong, leave the valve vented."""
+        self._close("error")
+        return TransitionCallbackReturn.SUCCESS
+
+    def close(self) -> None:
+        """Process exit: vent and close (idempotent)."""
+        self._close("process exiting")
+
+    def _stop_loops_and_vent(self, why: str) -> None:
+        for loop in self._loops:
+            loop.stop()
+        self._loops = []
+        if self.core is not None:
+            self.core.vent()
+            self.core.tick_setpoint(time.monotonic(), 0.0)
+        self._last_tick_state, self._last_reason = "inactive", f"{why}: valve vented"
+
+    def _close(self, why: str) -> None:
+        self._stop_loops_and_vent(why)
+        if self.core is not None:
+            self.core.close()
+            self.core = None
+
+    def _fail(self, reason: str) -> None:
+        self._last_tick_state, self._last_reason = "error", reason
+        self.get_logger().error(reason, throttle_duration_sec=5.0)
+
+    # -- data path -----------------------------------------------------------------------
+    def _on_command(self, msg: FluidPressure) -> None:
+        core = self.core
+        if core is None:
+            return
+        if not core.command(messages.gauge_pa_from(msg, self.ambient_pa), time.monotonic()):
+            self.get_logger().warning(core.last_refusal, throttle_duration_sec=1.0)
+
+    def _control_tick(self, _k: int, deadline_s: float) -> None:
+        core = self.core
+        if core is None:
+            return
+        tick = core.tick_setpoint(deadline_s, 1.0 / self.rate_hz)
+        if tick.state != self._last_tick_state:
+            if tick.state != "ok":
+                self.get_logger().warning(f"valve {tick.state}: {tick.reason}")
+            self._last_tick_state = tick.state
+        self._last_reason = tick.reason
+
+    def _poll_tick(self, _k: int, _deadline_s: float) -> None:
+        core = self.core
+        if core is None:
+            return
+        start = time.monotonic()
+        gauge_pa = core.poll_pressure(start)
+        if gauge_pa is None:
+            return
+        # The reading is true somewhere within the round trip; its middle is the best guess.
+        sample_s = 0.5 * (start + time.monotonic())
+        self._pub_measured.publish(
+            messages.fluid_pressure(gauge_pa, self._stamper.ns(sample_s), "", self.ambient_pa)
+        )
+
+    # -- services ------------------------------------------------------------------------
+    def _on_vent(self, _req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
+        if self.core is not None:
+            self.core.vent()
+        resp.success = True
+        resp.message = "valve vented; the next pressure command resumes control"
+        return resp
+
+    def _on_enable(self, req: SetBool.Request, resp: SetBool.Response) -> SetBool.Response:
+        if self.core is None:
+            resp.success, resp.message = False, "not configured"
+            return resp
+        self.core.set_enabled(bool(req.data))
+        resp.success = True
+        resp.message = "enabled" if req.data else "disabled: valve vented, commands ignored"
+        return resp
+
+    # -- diagnostics ---------------------------------------------------------------------
+    def _publish_diagnostics(self) -> None:
+        core = self.core
+        values: dict[str, object] = {"state": self._last_tick_state, "reason": self._last_reason}
+        level = diagnostics.OK if self._last_tick_state == "ok" else diagnostics.WARN
+        if self._last_tick_state in {"link_down", "error"}:
+            level = diagnostics.ERROR
+        if core is not None:
+            values.update(
+                {
+                    "setpoint_bar": f"{core.setpoint_pa / 1e5:.4f}",
+                    "commands_received": core.commands_received,
+                    "commands_refused_nonfinite": core.commands_refused,
+                    "commands_clamped": core.commands_clamped,
+                    "watchdog_trips": core.watchdog_trips,
+                    "valve_link": "up" if core.valve.up else f"down: {core.valve.error}",
+                    "transmitter_link": (
+                        "up" if core.transmitter.up else f"down: {core.transmitter.error}"
+                    ),
+                }
+            )
+            readback = core.read_back_pa()
+            if readback is not None:
+                values["valve_readback_bar"] = f"{readback / 1e5:.4f}"
+            for name, link in (("valve", core.valve), ("transmitter", core.transmitter)):
+                values.update({f"{name}.{k}": v for k, v in link.device.counters.as_dict().items()})
+        values["software_version"] = __version__
+        message = self._last_tick_state + (f": {self._last_reason}" if self._last_reason else "")
+        diagnostics.publish_status(
+            self._pub_diag,
+            self,
+            level=level,
+            message=message,
+            values=values,
+            hardware_id="valve_driver",
+        )
+
+
+def main(args: list[str] | None = None) -> None:
+    """Entry point of ``ros2 run catheter_driver valve_driver``."""
+    code = run_node(ValveDriverNode, args)
+    if code:
+        raise SystemExit(code)
+
+
+if __name__ == "__main__":
+    main()
