@@ -1,5 +1,7 @@
 """ament_python packaging for catheter_driver; also installs with plain pip."""
 
+from pathlib import Path
+
 from setuptools import find_packages, setup
 
 PACKAGE = "catheter_driver"
@@ -14,6 +16,8 @@ setup(
         # ament_index_python look for; colcon installs them under share/.
         ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
         ("share/" + PACKAGE, ["package.xml"]),
+        # Example parameter files, one per backend (docs/rig.md).
+        ("share/" + PACKAGE + "/config", [str(p) for p in sorted(Path("config").glob("*.yaml"))]),
     ],
     install_requires=["setuptools"],
     zip_safe=False,
