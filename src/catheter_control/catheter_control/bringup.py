@@ -82,6 +82,97 @@ def sim_graph_specs(
     return specs
 
 
+class EmulatedDevices:
+    """The emulated rig (``catheter_driver.emulators.rig``) as a child process.
+
+    It wraps the simulated plant behind pseudo-terminals that speak the real wire protocols
+    (Keller transmitter, DAC bridge valve, laser ADC bridge), so the real driver nodes run
+    unchanged. :attr:`ports` holds what the emulator printed: backend name -> options.
+
+    Args:
+        env: extra environment for the child.
+        extra_args: more CLI arguments, e.g. ``["--plant-param", "pneumatic_lag.enabled=true"]``.
+        timeout_s: how long to wait for the emulator to report its ports.
+    """
+
+    def __init__(
+        self,
+        env: Mapping[str, str] | None = None,
+        extra_args: Sequence[str] = (),
+        timeout_s: float = 20.0,
+    ) -> None:
+        self.env = {**os.environ, **(env or {})}
+        self.args = [
+            sys.executable,
+            "-m",
+            "catheter_driver.emulators.rig",
+            "--keller-pty",
+            "--dac-pty",
+            "--adc-pty",
+            *extra_args,
+        ]
+        self.timeout_s = timeout_s
+        self.proc: subprocess.Popen[bytes] | None = None
+        self.ports: dict[str, dict[str, object]] = {}
+
+    def start(self) -> dict[str, dict[str, object]]:
+        """Start the emulator and return its ports (raises RuntimeError if it does not say)."""
+        self.proc = subprocess.Popen(
+            self.args, stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=self.env
+        )
+        assert self.proc.stdout is not None
+        import selectors
+
+        sel = selectors.DefaultSelector()
+        sel.register(self.proc.stdout, selectors.EVENT_READ)
+        if not sel.select(self.timeout_s):
+            self.stop()
+            raise RuntimeError(f"the emulated rig printed no ports within {self.timeout_s:g} s")
+        line = self.proc.stdout.readline()
+        try:
+            self.ports = json.loads(line)
+        except ValueError:
+            self.stop()
+            raise RuntimeError(f"the emulated rig printed {line!r}, not its ports") from None
+        return self.ports
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        """SIGINT, then SIGKILL after ``timeout_s``."""
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(timeout_s)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+
+
+def driver_specs(
+    ports: Mapping[str, Mapping[str, object]], calibration_file: Path
+) -> list[NodeSpec]:
+    """The real driver nodes pointed at the emulated rig's ports."""
+    keller = ports["keller_serial"]
+    valve: dict[str, object] = {
+        "valve.backend": "dac_serial",
+        "valve.port": str(ports["dac_serial"]["port"]),
+        "transmitter.backend": "keller_serial",
+        "transmitter.port": str(keller["port"]),
+        "transmitter.baudrate": 115200,
+    }
+    for key in ("address", "reference"):
+        if key in keller:
+            valve[f"transmitter.{key}"] = keller[key]
+    laser: dict[str, object] = {
+        "adc.backend": "adc_serial",
+        "adc.port": str(ports["adc_serial"]["port"]),
+        "calibration_file": str(calibration_file),
+    }
+    return [
+        NodeSpec("valve_driver", "catheter_driver.valve_driver_node", valve),
+        NodeSpec("laser_angle", "catheter_driver.laser_angle_node", laser),
+    ]
+
+
 class ProcessGraph:
     """Run node specs as child processes; context manager with ordered, bounded shutdown.
 

@@ -26,9 +26,13 @@ from catheter_control.trajectory import (
     load_trajectory_file,
     preset_knots,
 )
+from catheter_driver.laser_core import Calibration
 from catheter_models.contract import DEFAULT_NAMESPACE
 from catheter_models.errors import CatheterError
 from catheter_models.signals import TEST_TRAJECTORIES, get_preset
+
+_PLANT_STRAIGHT_DISTANCE_M = 0.065
+"""The simulated rig's laser distance with the tip straight (plant rig parameter default)."""
 
 EXIT_REFUSED = 2
 EXIT_GRAPH = 3
@@ -55,7 +59,13 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
         help=f"thesis trajectory (sec. 9.3): {', '.join(TEST_TRAJECTORIES)}",
     )
     src.add_argument("--file", type=Path, help="CSV (t_s, angle_deg|angle_rad) or YAML trajectory")
-    parser.add_argument("--sim", action="store_true", help="bring up the simulated rig first")
+    rig = parser.add_mutually_exclusive_group()
+    rig.add_argument("--sim", action="store_true", help="bring up the simulated rig first")
+    rig.add_argument(
+        "--emulated-rig",
+        action="store_true",
+        help="bring up emulated devices and the real valve_driver and laser_angle first",
+    )
     parser.add_argument("--out", type=Path, help="run directory (default runs/<time>-<name>)")
     parser.add_argument("--namespace", default=DEFAULT_NAMESPACE)
     parser.add_argument("--control-rate-hz", type=float, default=250.0)
@@ -86,36 +96,62 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_REFUSED
 
     run_dir = args.out or Path("runs") / f"{dt.datetime.now():%Y%m%d-%H%M%S}-{name}"
-    bag_path = run_dir / "bag" if args.sim else None
+    local = args.sim or args.emulated_rig
+    bag_path = run_dir / "bag" if local else None
     graph = None
-    if args.sim:
-        from catheter_control.bringup import ProcessGraph, sim_graph_specs
+    devices = None
+    if local:
+        from catheter_control.bringup import (
+            EmulatedDevices,
+            ProcessGraph,
+            driver_specs,
+            sim_graph_specs,
+        )
 
-        # A simulated graph must never reach a real rig on the network.
+        # A local graph must never reach a real rig on the network.
         os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+        hardware = (
+            "simulated thesis rig (catheter_driver sim_hardware)"
+            if args.sim
+            else "emulated devices (Keller, DAC bridge, laser ADC over ptys) around the "
+            "simulated rig, real valve_driver and laser_angle"
+        )
         custom = {
             "signal": name,
             "signal_params": repr(signal_params),
-            "hardware": "simulated thesis rig (catheter_driver sim_hardware)",
+            "hardware": hardware,
             "compensator": "none (static inverse)",
         }
         run_dir.mkdir(parents=True, exist_ok=True)
-        graph = ProcessGraph(
-            sim_graph_specs(
-                bag_path, custom, compensator_params={"control_rate_hz": args.control_rate_hz}
-            ),
-            args.namespace,
-            log_dir=run_dir / "logs",
+        specs = sim_graph_specs(
+            bag_path, custom, compensator_params={"control_rate_hz": args.control_rate_hz}
         )
-        print(f"follow_trajectory: starting the simulated rig (logs in {run_dir / 'logs'})")
+        if args.emulated_rig:
+            devices = EmulatedDevices()
+            try:
+                ports = devices.start()
+            except RuntimeError as exc:
+                print(f"follow_trajectory: {exc}", file=sys.stderr)
+                return EXIT_GRAPH
+            # The emulated laser is taken as zeroed at the plant's straight-tip distance,
+            # as ~/zero would measure it with the muscle vented.
+            calibration = run_dir / "laser_calibration.json"
+            Calibration(_PLANT_STRAIGHT_DISTANCE_M, 0.0, 0, "emulated rig").save(calibration)
+            recorder, _sim, compensator = specs
+            specs = [recorder, *driver_specs(ports, calibration), compensator]
+        graph = ProcessGraph(specs, args.namespace, log_dir=run_dir / "logs")
+        what = "simulated rig" if args.sim else "emulated devices and the real drivers"
+        print(f"follow_trajectory: starting the {what} (logs in {run_dir / 'logs'})")
         graph.start()
     try:
         return _run(args, plan, run_dir, bag_path, graph)
     finally:
         if graph is not None:
             graph.stop()
-            if bag_path is not None and bag_path.exists():
-                print(f"Bag: {bag_path}")
+        if devices is not None:
+            devices.stop()
+        if bag_path is not None and bag_path.exists():
+            print(f"Bag: {bag_path}")
 
 
 def _run(
