@@ -19,21 +19,21 @@ class FakeValve(ValveSetpoint):
     def __init__(self) -> None:
         super().__init__()
         self.written: list[float] = []
-        self._open = False
+        self._is_open = False
         self.fail_open = False
         self.fail_write = False
 
-    def open(self) -> None:
+    def _open(self) -> None:
         if self.fail_open:
             raise DeviceError("port /dev/ttyX: no such device")
-        self._open = True
+        self._is_open = True
 
     def close(self) -> None:
-        self._open = False
+        self._is_open = False
 
     @property
     def is_open(self) -> bool:
-        return self._open
+        return self._is_open
 
     def write_setpoint_pa(self, gauge_pa: float) -> None:
         if self.fail_write:
@@ -46,17 +46,17 @@ class FakeTransmitter(PressureTransmitter):
         super().__init__()
         self.value = 1.0e5
         self.timeouts_left = 0
-        self._open = False
+        self._is_open = False
 
-    def open(self) -> None:
-        self._open = True
+    def _open(self) -> None:
+        self._is_open = True
 
     def close(self) -> None:
-        self._open = False
+        self._is_open = False
 
     @property
     def is_open(self) -> bool:
-        return self._open
+        return self._is_open
 
     def read_gauge_pa(self) -> float:
         if self.timeouts_left:

@@ -184,8 +184,7 @@ class LaserAngleNode(LifecycleNode):
             core.adc.counters.last_error = str(exc)
             try:
                 core.adc.close()
-                core.adc.open()
-                core.adc.counters.reconnects += 1
+                core.adc.open()  # counts itself in counters.reconnects
                 self._state, self._reason = "active", ""
             except CatheterError:
                 time.sleep(0.2)  # the loop skips the deadlines it missed; no busy retry

@@ -71,8 +71,7 @@ class _Link(Generic[DeviceT]):
         except DeviceError as exc:
             self.error = f"{self.device.describe()}: {exc}"
             return False
-        if self.error:  # it was up before, or failed before: this is a reconnect
-            self.device.counters.reconnects += 1
+        # The device counts the re-open in counters.reconnects itself.
         self.up = True
         self.error = ""
         return True

@@ -61,10 +61,22 @@ class Device(ABC):
 
     def __init__(self) -> None:
         self.counters = DeviceCounters()
+        self._opened_before = False
+
+    def open(self) -> None:
+        """Open the link and initialise the device. Raises DeviceError if it cannot.
+
+        Every successful open after the first counts as a reconnect, here and only here, so
+        a driver that re-opens a lost device never counts it twice.
+        """
+        self._open()
+        if self._opened_before:
+            self.counters.reconnects += 1
+        self._opened_before = True
 
     @abstractmethod
-    def open(self) -> None:
-        """Open the link and initialise the device. Raises DeviceError if it cannot."""
+    def _open(self) -> None:
+        """Open the link and initialise the device (backend-specific)."""
 
     @abstractmethod
     def close(self) -> None:

@@ -53,7 +53,6 @@ class CanopenValve(ValveSetpoint):
         """Raw value of the latest TPDO seen; None until one arrives."""
         self.last_read_back_s: float | None = None
         """Monotonic time the latest TPDO was taken off the bus [s]."""
-        self._opened_before = False
 
     @classmethod
     def from_params(
@@ -104,7 +103,7 @@ class CanopenValve(ValveSetpoint):
             f"0x{self.tpdo_cob_id:03X}) on {self.transport.describe()}"
         )
 
-    def open(self) -> None:
+    def _open(self) -> None:
         """Open the bus and start the node (NMT), if configured."""
         try:
             self.transport.open()
@@ -116,9 +115,6 @@ class CanopenValve(ValveSetpoint):
             raise
         self.last_read_back_raw = None
         self.last_read_back_s = None
-        if self._opened_before:
-            self.counters.reconnects += 1
-        self._opened_before = True
 
     def close(self) -> None:
         """Shut the bus down."""

@@ -39,7 +39,6 @@ class DacBridgeValve(ValveSetpoint):
         self.applied_mv: int | None = None
         """Output the bridge last confirmed [mV]."""
         self._parser = dac_bridge.DacFrameParser()
-        self._opened_before = False
 
     @classmethod
     def from_params(
@@ -75,7 +74,7 @@ class DacBridgeValve(ValveSetpoint):
             f"{self.transport.describe()}"
         )
 
-    def open(self) -> None:
+    def _open(self) -> None:
         """Open the line and ask the bridge for its output (proves it answers)."""
         try:
             self.transport.open()
@@ -84,9 +83,6 @@ class DacBridgeValve(ValveSetpoint):
             self.counters.last_error = str(exc)
             self.transport.close()
             raise
-        if self._opened_before:
-            self.counters.reconnects += 1
-        self._opened_before = True
 
     def close(self) -> None:
         """Close the line."""

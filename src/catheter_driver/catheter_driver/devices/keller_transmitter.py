@@ -57,7 +57,6 @@ class KellerTransmitter(PressureTransmitter):
         self.last_status = 0
         """STAT byte of the last F73 reply, passed through for diagnostics."""
         self._parser = keller.KellerReplyParser()
-        self._opened_before = False
 
     @classmethod
     def from_params(
@@ -108,7 +107,7 @@ class KellerTransmitter(PressureTransmitter):
             f"{self.transport.describe()}"
         )
 
-    def open(self) -> None:
+    def _open(self) -> None:
         """Open the line and initialise the device (F48).
 
         Raises:
@@ -122,9 +121,6 @@ class KellerTransmitter(PressureTransmitter):
             self.counters.last_error = str(exc)
             self.transport.close()
             raise
-        if self._opened_before:
-            self.counters.reconnects += 1
-        self._opened_before = True
 
     def close(self) -> None:
         """Close the line."""

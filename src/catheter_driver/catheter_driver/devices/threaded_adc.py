@@ -36,7 +36,6 @@ class ThreadedLaserAdc(LaserAdc):
         self._thread: threading.Thread | None = None
         self._error: DeviceError | None = None
         self._last_seq: int | None = None
-        self._opened_before = False
         self.samples_lost = 0
         """Samples missing from the sequence counter (gaps), since creation."""
 
@@ -56,7 +55,7 @@ class ThreadedLaserAdc(LaserAdc):
     def _poll(self, timeout_s: float) -> list[AdcFrame]:
         """Frames received within ``timeout_s`` (maybe none). Raises DeviceError if down."""
 
-    def open(self) -> None:
+    def _open(self) -> None:
         """Open the link and start the reader thread."""
         self.close()
         try:
@@ -71,9 +70,6 @@ class ThreadedLaserAdc(LaserAdc):
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name=type(self).__name__, daemon=True)
         self._thread.start()
-        if self._opened_before:
-            self.counters.reconnects += 1
-        self._opened_before = True
 
     def close(self) -> None:
         """Stop the reader and close the link (idempotent)."""
