@@ -19,6 +19,7 @@ import sys
 import time
 import uuid
 from collections.abc import Callable, Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -46,6 +47,10 @@ from catheter_models.plant import PlantConfig
 VALVE_TAU_S = PlantConfig.thesis_rig().rig["valve_time_constant_s"]
 SETTLE_S = 0.15  # 30 valve time constants: the first-order step is complete
 PRESSURE_TOL_PA = 3.0e3  # 10 sigma of the transmitter noise (300 Pa) plus float32 rounding
+# These benches write a set-point once and check it SETTLE_S later, which a valve interface's
+# fail-safe (0.2 s without a set-point: vent) would race on a busy machine. It gets 1 s
+# here; test_valve_interfaces_vent_when_the_host_goes_silent checks the default.
+BENCH_FAILSAFE_S = 1.0
 
 
 @pytest.fixture(scope="module")
@@ -143,7 +148,7 @@ def _pty_bench(rig: EmulatedRig, role: str, **options: Any) -> Bench:
                 reference=options.get("reference", "gauge"),
             )
         elif role == "dac":
-            emulator = DacBridgeEmulator(rig, endpoint)
+            emulator = DacBridgeEmulator(rig, endpoint, failsafe_timeout_s=BENCH_FAILSAFE_S)
         else:
             emulator = LaserAdcSerialEmulator(rig, endpoint)
         return emulator, {"port": endpoint.slave_path}
@@ -166,7 +171,7 @@ def _can_bench(rig: EmulatedRig, role: str) -> Bench:
         bus = CanTransport("virtual", channel)
         emulator: Emulator
         if role == "canopen":
-            emulator = CanopenAoEmulator(rig, bus, node_id=5)
+            emulator = CanopenAoEmulator(rig, bus, node_id=5, failsafe_timeout_s=BENCH_FAILSAFE_S)
         else:
             emulator = LaserAdcCanEmulator(rig, bus, arbitration_id=0x310)
         return emulator, {"interface": "virtual", "channel": channel}
@@ -383,6 +388,8 @@ def test_rig_cli_serves_the_real_devices(tmp_path: Any) -> None:
             "--adc-pty",
             "--plant-param",
             "pressure_noise_pa=0",
+            "--failsafe-timeout-s",
+            str(BENCH_FAILSAFE_S),
         ],
         stdout=subprocess.PIPE,
         text=True,
@@ -405,3 +412,110 @@ def test_rig_cli_serves_the_real_devices(tmp_path: Any) -> None:
     finally:
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(5.0) == 0
+
+
+@pytest.mark.parametrize("backend", ["dac-pty", "canopen-virtual"])
+def test_valve_interfaces_vent_when_the_host_goes_silent(rig: EmulatedRig, backend: str) -> None:
+    """The bridge / AO module drops to 0 after 0.2 s without a set-point, until the next one."""
+    emulator: DacBridgeEmulator | CanopenAoEmulator
+    if backend == "dac-pty":
+        endpoint = PtyEndpoint()
+        emulator = DacBridgeEmulator(rig, endpoint)
+        device: Device = make_valve("dac_serial", port=endpoint.slave_path)
+    else:
+        channel = f"test-{uuid.uuid4().hex[:8]}"
+        emulator = CanopenAoEmulator(rig, CanTransport("virtual", channel), node_id=5)
+        device = make_valve("canopen", interface="virtual", channel=channel, node_id=5)
+    assert isinstance(device, (DacBridgeValve, CanopenValve))
+    emulator.start()
+    try:
+        device.open()
+        # A host that refreshes every 4 ms (as valve_driver does) never trips it.
+        for _ in range(100):
+            device.write_setpoint_pa(1.5e5)
+            time.sleep(0.004)
+        assert emulator.failsafe.trips == 0
+        assert rig.hw.command_pa == pytest.approx(1.5e5, abs=100.0)
+        last_s = time.monotonic()
+        deadline = last_s + 1.0
+        while emulator.failsafe.trips == 0 and time.monotonic() < deadline:
+            time.sleep(0.005)
+        assert emulator.failsafe.trips == 1
+        tripped_at, fed_at = emulator.failsafe.tripped_at_s, emulator.failsafe.last_setpoint_s
+        assert tripped_at is not None and fed_at is not None and fed_at <= last_s
+        assert 0.2 <= tripped_at - fed_at <= 0.25
+        assert rig.hw.command_pa == 0.0
+        time.sleep(0.05)
+        assert device.read_back_pa() == pytest.approx(0.0, abs=20.0), "the output reads 0"
+        time.sleep(0.3)
+        assert emulator.failsafe.trips == 1, "it trips once per silence"
+        device.write_setpoint_pa(1.0e5)  # the next set-point is applied as usual
+        time.sleep(0.02)
+        assert rig.hw.command_pa == pytest.approx(1.0e5, abs=100.0)
+    finally:
+        device.close()
+        emulator.stop()
+        rig.command(0.0)
+
+
+def test_rig_cli_faults_unplug_and_replug_at_a_stable_path() -> None:
+    """The CLI's stdin commands: inject a fault, unplug and replug (same symlink), query."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "catheter_driver.emulators.rig", "--keller-pty", "--dac-pty"],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    assert proc.stdin is not None and proc.stdout is not None
+
+    def send(command: dict[str, Any]) -> dict[str, Any]:
+        assert proc.stdin is not None and proc.stdout is not None
+        proc.stdin.write(json.dumps(command) + "\n")
+        proc.stdin.flush()
+        reply: dict[str, Any] = json.loads(proc.stdout.readline())
+        return reply
+
+    try:
+        ports = json.loads(proc.stdout.readline())
+        path = ports["dac_serial"]["port"]
+        assert Path(path).is_symlink() and Path(path).resolve().as_posix().startswith("/dev/pts/")
+        tx = make_transmitter("keller_serial", **ports["keller_serial"])
+        tx.open()
+        assert send({"fault": "no_reply", "device": "keller_serial"})["ok"]
+        with pytest.raises(DeviceTimeout):
+            tx.read_gauge_pa()
+        assert send({"fault": "none", "device": "keller_serial"})["ok"]
+        tx.read_gauge_pa()
+
+        valve = make_valve("dac_serial", **ports["dac_serial"])
+        valve.open()
+        valve.write_setpoint_pa(2.0e5)
+        unplugged = send({"unplug": "dac_serial"})
+        assert unplugged["ok"] and not unplugged["plugged"] and not Path(path).exists()
+        with pytest.raises(DeviceError):
+            valve.write_setpoint_pa(2.0e5)
+        time.sleep(0.3)  # the bridge is still powered: its fail-safe vents
+        state = send({"query": "state"})["state"]
+        assert state["command_pa"] == 0.0 and state["devices"]["dac_serial"]["failsafe"]["trips"]
+        assert state["vented_at_s"] - unplugged["t_s"] <= 0.25
+        replugged = send({"replug": "dac_serial"})
+        assert replugged["ok"] and replugged["port"] == path
+        assert Path(path).resolve().as_posix() == replugged["pty"]
+        valve.close()
+        valve.open()  # the same path
+        valve.write_setpoint_pa(1.0e5)
+        assert valve.counters.reconnects == 1
+        assert send({"query": "state"})["state"]["command_pa"] == pytest.approx(1.0e5, abs=100)
+
+        refused = send({"unplug": "canopen"})
+        assert not refused["ok"] and "unpluggable: keller_serial, dac_serial" in refused["error"]
+        assert not send({"fault": "smoke", "device": "dac_serial"})["ok"]
+        proc.stdin.write("unplug dac_serial\n")
+        proc.stdin.flush()
+        assert "not JSON" in json.loads(proc.stdout.readline())["error"]
+        for device in (tx, valve):
+            device.close()
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(5.0) == 0
+    assert not Path(path).parent.exists(), "the symlink directory is removed at exit"

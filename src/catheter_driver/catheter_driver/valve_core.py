@@ -46,6 +46,12 @@ class SetpointTick:
 DeviceT = TypeVar("DeviceT", bound=Device)
 
 
+def _named(device: Device, exc: DeviceError) -> str:
+    """``<device>: <error>``, naming the device once (most device errors already name it)."""
+    name, text = device.describe(), str(exc)
+    return text if text.startswith(name) else f"{name}: {text}"
+
+
 class _Link(Generic[DeviceT]):
     """One device with its open/closed state and a reconnect schedule."""
 
@@ -69,7 +75,7 @@ class _Link(Generic[DeviceT]):
             self.device.close()
             self.device.open()
         except DeviceError as exc:
-            self.error = f"{self.device.describe()}: {exc}"
+            self.error = _named(self.device, exc)
             return False
         # The device counts the re-open in counters.reconnects itself.
         self.up = True
@@ -91,7 +97,7 @@ class _Link(Generic[DeviceT]):
     def lost(self, exc: DeviceError, now_s: float) -> None:
         self.up = False
         self.consecutive_timeouts = 0
-        self.error = f"{self.device.describe()}: {exc}"
+        self.error = _named(self.device, exc)
         self.device.counters.last_error = str(exc)
         self.next_try_s = now_s + self.period_s
 

@@ -251,6 +251,10 @@ class ValveDriverNode(LifecycleNode):
                 values.update({f"{name}.{k}": v for k, v in link.device.counters.as_dict().items()})
         values["software_version"] = __version__
         message = self._last_tick_state + (f": {self._last_reason}" if self._last_reason else "")
+        if core is not None and not core.transmitter.up:
+            # pressure/measured has stopped: not OK, even while the valve follows commands.
+            level = diagnostics.ERROR
+            message += f"; transmitter link down: {core.transmitter.error}"
         diagnostics.publish_status(
             self._pub_diag,
             self,

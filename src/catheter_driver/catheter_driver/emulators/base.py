@@ -1,9 +1,10 @@
-"""What every emulator shares: a serving thread, fault injection, start/stop."""
+"""What every emulator shares: a serving thread, fault injection, start/stop, fail-safe."""
 
 from __future__ import annotations
 
 import threading
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from typing import Literal
 
 from catheter_models.errors import ParameterError
@@ -46,6 +47,12 @@ class Emulator(ABC):
         with self._fault_lock:
             self._fault = fault
             self._fault_left = count
+
+    @property
+    def fault(self) -> Fault:
+        """The fault being injected now ("none" if none)."""
+        with self._fault_lock:
+            return self._fault
 
     def _take_fault(self) -> Fault:
         """The fault for the frame about to be sent (counts a limited injection down)."""
@@ -96,3 +103,67 @@ class Emulator(ABC):
     @abstractmethod
     def _serve(self, timeout_s: float) -> None:
         """Handle what arrived within ``timeout_s`` (streaming emulators may just wait)."""
+
+
+class HostFailsafe:
+    """A set-point device's own fail-safe: vent when its host goes silent.
+
+    Real valve interfaces do this in the device (a bridge firmware watchdog, a CANopen
+    RPDO or heartbeat timeout): if no set-point arrives for ``timeout_s``, the output drops
+    to zero and stays there until the next set-point. The host that crashes, hangs or loses
+    its cable thus never leaves the muscle inflated. Armed by each set-point; disarmed when
+    it trips (it trips once per silence).
+
+    Args:
+        timeout_s: silence that trips it [s]; ``math.inf`` disables it.
+        vent: what tripping does (called on the serving thread).
+    """
+
+    def __init__(self, timeout_s: float, vent: Callable[[], None]) -> None:
+        if not timeout_s > 0.0:
+            raise ParameterError(f"failsafe_timeout_s must be > 0 s, got {timeout_s!r}")
+        self.timeout_s = timeout_s
+        self._vent = vent
+        self._lock = threading.Lock()
+        self._deadline_s: float | None = None
+        self.trips = 0
+        """Times it has vented, since creation."""
+        self.tripped_at_s: float | None = None
+        """Monotonic time of the latest trip [s]; None before any."""
+        self.last_setpoint_s: float | None = None
+        """Monotonic time of the latest set-point [s]; None before any."""
+
+    def fed(self, now_s: float) -> None:
+        """A set-point arrived at ``now_s``: re-arm."""
+        with self._lock:
+            self.last_setpoint_s = now_s
+            self._deadline_s = now_s + self.timeout_s
+
+    def wait_s(self, now_s: float, longest_s: float) -> float:
+        """How long the serving thread may block before it must :meth:`check` again [s]."""
+        with self._lock:
+            if self._deadline_s is None:
+                return longest_s
+            return min(longest_s, max(self._deadline_s - now_s, 0.0))
+
+    def check(self, now_s: float) -> bool:
+        """Vent if armed and silent for ``timeout_s``; True if it vented now."""
+        with self._lock:
+            if self._deadline_s is None or now_s < self._deadline_s:
+                return False
+            self._deadline_s = None
+            self.trips += 1
+            self.tripped_at_s = now_s
+        self._vent()
+        return True
+
+    def state(self) -> dict[str, object]:
+        """Plain values for a status report."""
+        with self._lock:
+            return {
+                "timeout_s": self.timeout_s,
+                "armed": self._deadline_s is not None,
+                "trips": self.trips,
+                "tripped_at_s": self.tripped_at_s,
+                "last_setpoint_s": self.last_setpoint_s,
+            }

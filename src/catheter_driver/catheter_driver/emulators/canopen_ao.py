@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import threading
+import time
 
-from catheter_driver.emulators.base import Emulator
+from catheter_driver.emulators.base import Emulator, HostFailsafe
 from catheter_driver.emulators.rig import EmulatedRig
 from catheter_driver.protocols import FrameError, canopen_ao
 from catheter_driver.transports.base import FrameTransport, TransportError
@@ -20,12 +22,17 @@ class CanopenAoEmulator(Emulator):
     ``require_nmt_start``). Every applied RPDO is answered by a TPDO with the raw value now
     driven (event-driven transmission).
 
+    Fail-safe (docs/protocols/canopen_valve.md): when no RPDO has been applied for
+    ``failsafe_timeout_s`` (CiA 301 RPDO event timer), the module drives ``raw_at_zero``
+    (valve vented), reports it by TPDO, and holds it until the next RPDO.
+
     Args:
         rig: the emulated rig.
         transport: the emulator's bus (e.g. python-can ``virtual`` on the driver's channel).
         node_id: this module's node id, 1..127.
         scaling: raw value <-> valve pressure (must match the driver's to be meaningful).
         require_nmt_start: ignore PDOs until started.
+        failsafe_timeout_s: RPDO silence after which the output drops to zero [s]; inf: never.
     """
 
     def __init__(
@@ -36,6 +43,7 @@ class CanopenAoEmulator(Emulator):
         node_id: int = 1,
         scaling: canopen_ao.AoScaling | None = None,
         require_nmt_start: bool = True,
+        failsafe_timeout_s: float = 0.2,
     ) -> None:
         super().__init__(f"canopen-ao-emulator-{node_id}")
         self.rig = rig
@@ -49,6 +57,7 @@ class CanopenAoEmulator(Emulator):
         self.frames_refused = 0
         """PDOs dropped as malformed."""
         self._operational = threading.Event()
+        self.failsafe = HostFailsafe(failsafe_timeout_s, self._vent)
 
     @property
     def operational(self) -> bool:
@@ -64,11 +73,25 @@ class CanopenAoEmulator(Emulator):
     def _close(self) -> None:
         self.transport.close()
 
+    def _vent(self) -> None:
+        self.raw = self.scaling.pa_to_raw(0.0)
+        self.rig.command(0.0)
+        # Event-driven TPDO (the output changed); with the bus down it is vented all the same.
+        with contextlib.suppress(TransportError):
+            self.transport.send(
+                canopen_ao.tpdo1_cob_id(self.node_id), canopen_ao.encode_ao_raw(self.raw)
+            )
+
     def _serve(self, timeout_s: float) -> None:
+        self._handle(self.failsafe.wait_s(time.monotonic(), timeout_s))
+        self.failsafe.check(time.monotonic())
+
+    def _handle(self, timeout_s: float) -> None:
         try:
             frame = self.transport.recv(timeout_s)
         except TransportError:
-            return  # closed under us by stop()
+            self._stop.wait(timeout_s)  # bus down: keep the fail-safe running, do not spin
+            return
         if frame is None:
             return
         cob_id, data = frame
@@ -88,6 +111,7 @@ class CanopenAoEmulator(Emulator):
             return  # a module that has dropped off the bus: nothing applied, nothing sent
         self.raw = raw
         self.rig.command(self.scaling.raw_to_pa(raw))
+        self.failsafe.fed(time.monotonic())
         self.rpdos_applied += 1
         tpdo = canopen_ao.tpdo1_cob_id(self.node_id)
         try:

@@ -70,7 +70,9 @@ class KellerEmulator(Emulator):
         try:
             data = self.endpoint.read(256, timeout_s)
         except TransportError:
-            return  # closed under us by stop(); the loop ends
+            # The line is gone (unplugged, or closed by stop()): wait, do not spin.
+            self._stop.wait(timeout_s)
+            return
         for request in self._parser.feed(data):
             if request.address not in (self.address, keller.TRANSPARENT_ADDRESS):
                 continue

@@ -9,23 +9,44 @@ Run as a program, it is a whole rig in a separate process for integration tests:
     python -m catheter_driver.emulators.rig --keller-pty --dac-pty --adc-pty
 
 It prints one JSON line (flushed) mapping each emulated device's backend name to the
-parameters that reach it, e.g. ``{"keller_serial": {"port": "/dev/pts/5", "address": 1}}``,
+parameters that reach it, e.g.
+``{"keller_serial": {"port": "/tmp/emulated-rig-x/keller_serial", "address": 1}}``,
 ready for ``devices.factory`` (``make_transmitter("keller_serial", **line["keller_serial"])``),
-then runs until SIGINT or SIGTERM.
+then runs until SIGINT or SIGTERM. A pty device's ``port`` is a stable symlink to its
+``/dev/pts/N`` (as a udev rule gives a real adapter), so a driver finds a replugged device
+at the same path.
+
+Faults are injected at run time by JSON commands on stdin, one per line; each is answered
+by one JSON line on stdout, ``{"ack": <command>, "ok": true, "t_s": <monotonic>, ...}``
+(``"ok": false, "error": ...`` if refused)::
+
+    {"fault": "no_reply", "device": "keller_serial"}   # also bad_crc, garbage; "count": n
+    {"fault": "none", "device": "keller_serial"}       # clear it
+    {"unplug": "dac_serial"}    # close the pty (the driver's port dies), remove the symlink
+    {"replug": "dac_serial"}    # a new pty; the symlink now points at it
+    {"query": "state"}          # the plant's truth and each device's state, under "state"
+
+``t_s`` and every time in the state are ``time.monotonic()`` of this process: the same
+clock (CLOCK_MONOTONIC) as any other process on the machine, so a test can compare them
+with its own.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
+import shutil
 import signal
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from types import TracebackType
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TextIO
 
 from catheter_driver.rt_loop import DeadlineLoop
 from catheter_driver.sim_hardware import SimHardware
@@ -34,6 +55,7 @@ from catheter_models.plant import PlantConfig, PlantSample
 
 if TYPE_CHECKING:
     from catheter_driver.emulators.base import Emulator
+    from catheter_driver.emulators.pty_endpoint import PtyEndpoint
 
 SampleListener = Callable[[PlantSample, float], None]
 """Called on the rig's thread with each new sample and its deadline [monotonic s]."""
@@ -70,6 +92,8 @@ class EmulatedRig:
         self._latest: PlantSample | None = None
         self._loop: DeadlineLoop | None = None
         self._lock = threading.Lock()
+        self._last_command_s: float | None = None
+        self._vented_at_s: float | None = None
 
     # -- wiring ------------------------------------------------------------------------
     def add_listener(self, listener: SampleListener) -> None:
@@ -135,7 +159,38 @@ class EmulatedRig:
     # -- what the emulators use --------------------------------------------------------
     def command(self, gauge_pa: float) -> bool:
         """Apply a valve set-point, gauge [Pa] (clamped; refused if not finite)."""
-        return self.hw.command(gauge_pa, time.monotonic())
+        now_s = time.monotonic()
+        with self._lock:
+            was_pa = self.hw.command_pa
+            ok = self.hw.command(gauge_pa, now_s)
+            if ok:
+                self._last_command_s = now_s
+                if was_pa > 0.0 and self.hw.command_pa <= 0.0:
+                    self._vented_at_s = now_s
+        return ok
+
+    def state(self) -> dict[str, Any]:
+        """The plant's truth now, as plain values (for the CLI's ``query``).
+
+        Keys: ``t_s`` (monotonic now), ``command_pa`` (valve set-point in force),
+        ``muscle_pa`` (pressure in the muscle, noise-free), ``measured_pa`` (what the
+        transmitter reads), ``angle_deg`` (true bend), ``distance_m`` (laser),
+        ``last_command_s`` (when the latest set-point was applied) and ``vented_at_s``
+        (when the set-point last dropped from above 0 to 0), monotonic [s] or None.
+        """
+        sample = self.latest
+        with self._lock:
+            last_s, vented_s = self._last_command_s, self._vented_at_s
+        return {
+            "t_s": time.monotonic(),
+            "command_pa": self.hw.command_pa,
+            "muscle_pa": None if sample is None else sample.muscle_pressure_pa,
+            "measured_pa": self.measured_pressure_pa,
+            "angle_deg": None if sample is None else math.degrees(sample.true_angle_rad),
+            "distance_m": None if sample is None else sample.distance_m,
+            "last_command_s": last_s,
+            "vented_at_s": vented_s,
+        }
 
     @property
     def latest(self) -> PlantSample | None:
@@ -198,6 +253,20 @@ def _build_parser() -> argparse.ArgumentParser:
         help="python-can interface (virtual works only within one process; use vcan across)",
     )
     p.add_argument("--can-channel", default="vcan0")
+    p.add_argument(
+        "--failsafe-timeout-s",
+        type=float,
+        default=0.2,
+        help="the valve interfaces (DAC bridge, CANopen AO) vent after this long without a "
+        "set-point [s]",
+    )
+    p.add_argument(
+        "--link-dir",
+        type=Path,
+        default=None,
+        help="where the stable symlinks to the ptys go (default: a new temporary directory, "
+        "removed at exit)",
+    )
     p.add_argument("--seed", type=int, default=0, help="plant noise seed")
     p.add_argument(
         "--plant-param",
@@ -208,6 +277,131 @@ def _build_parser() -> argparse.ArgumentParser:
         "(valve_time_constant_s=0.01), <effect>.enabled=false or <effect>.<param>=value",
     )
     return p
+
+
+class _PtyDevice:
+    """One pty-backed emulator of the CLI, reachable at a stable symlink."""
+
+    def __init__(self, emulator: Emulator, endpoint: PtyEndpoint, link: Path) -> None:
+        self.emulator = emulator
+        self.endpoint = endpoint
+        self.link = link
+        self.plugged = True
+        self._point_link()
+
+    def _point_link(self) -> None:
+        # Atomic: a driver opening the path sees the old target or the new one, never none.
+        tmp = self.link.with_name(f".{self.link.name}.tmp")
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+        tmp.symlink_to(self.endpoint.slave_path)
+        tmp.replace(self.link)
+
+    def unplug(self) -> None:
+        """Close the pty (the driver's port dies) and remove the symlink, as udev would.
+
+        The emulator keeps running, as a device keeps its own power: a valve interface's
+        fail-safe still vents.
+        """
+        self.endpoint.close()
+        with contextlib.suppress(FileNotFoundError):
+            self.link.unlink()
+        self.plugged = False
+
+    def replug(self) -> None:
+        """A new pty (a new /dev/pts/N); the symlink points at it."""
+        self.endpoint.open()
+        self._point_link()
+        self.plugged = True
+
+    def state(self) -> dict[str, Any]:
+        return {
+            "port": str(self.link),
+            "pty": self.endpoint.slave_path if self.plugged else None,
+            "plugged": self.plugged,
+        }
+
+
+class _Control:
+    """The stdin command channel of the CLI (see the module docstring)."""
+
+    def __init__(
+        self, rig: EmulatedRig, emulators: dict[str, Emulator], ptys: dict[str, _PtyDevice]
+    ) -> None:
+        self.rig = rig
+        self.emulators = emulators
+        self.ptys = ptys
+        self._out_lock = threading.Lock()
+
+    def serve(self, stdin: TextIO, stdout: TextIO) -> None:
+        """Answer each command line until stdin closes."""
+        for line in stdin:
+            if not line.strip():
+                continue
+            reply = self.handle(line)
+            with self._out_lock:
+                stdout.write(json.dumps(reply) + "\n")
+                stdout.flush()
+
+    def handle(self, line: str) -> dict[str, Any]:
+        """One command line to its reply."""
+        try:
+            command = json.loads(line)
+        except ValueError as exc:
+            return {"ack": line.strip(), "ok": False, "error": f"not JSON: {exc}"}
+        try:
+            if not isinstance(command, dict):
+                raise ParameterError("a command is a JSON object")
+            extra = self._run(command)
+        except (ParameterError, KeyError, OSError, TypeError, ValueError) as exc:
+            return {"ack": command, "ok": False, "error": str(exc)}
+        return {"ack": command, "ok": True, "t_s": time.monotonic(), **extra}
+
+    def _run(self, command: dict[str, Any]) -> dict[str, Any]:
+        if "fault" in command:
+            emulator = self._emulator(command.get("device"))
+            emulator.inject(command["fault"], command.get("count"))
+            return {}
+        if "unplug" in command:
+            device = self._pty(command["unplug"])
+            device.unplug()
+            return device.state()
+        if "replug" in command:
+            device = self._pty(command["replug"])
+            if device.plugged:
+                raise ParameterError(f"{command['replug']} is plugged in")
+            device.replug()
+            return device.state()
+        if command.get("query") == "state":
+            return {"state": self.state()}
+        raise ParameterError(
+            'unknown command; valid: {fault, device[, count]}, {unplug}, {replug}, {query: "state"}'
+        )
+
+    def _emulator(self, name: object) -> Emulator:
+        if name not in self.emulators:
+            raise ParameterError(f"no device {name!r}; this rig has {', '.join(self.emulators)}")
+        return self.emulators[str(name)]
+
+    def _pty(self, name: object) -> _PtyDevice:
+        if name not in self.ptys:
+            raise ParameterError(
+                f"{name!r} is not a pty device of this rig; unpluggable: {', '.join(self.ptys)}"
+            )
+        return self.ptys[str(name)]
+
+    def state(self) -> dict[str, Any]:
+        """The rig's truth plus each device's fault, plug and fail-safe state."""
+        devices: dict[str, Any] = {}
+        for name, emulator in self.emulators.items():
+            entry: dict[str, Any] = {"fault": emulator.fault, "running": emulator.running}
+            if name in self.ptys:
+                entry.update(self.ptys[name].state())
+            failsafe = getattr(emulator, "failsafe", None)
+            if failsafe is not None:
+                entry["failsafe"] = failsafe.state()
+            devices[name] = entry
+        return {**self.rig.state(), "devices": devices}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -222,41 +416,72 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = _build_parser().parse_args(argv)
     try:
         config = _parse_plant_params(args.plant_param, args.seed)
+        if not args.failsafe_timeout_s > 0.0:
+            raise ParameterError(f"--failsafe-timeout-s must be > 0, got {args.failsafe_timeout_s}")
     except ParameterError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     rig = EmulatedRig(config)
+    own_dir = args.link_dir is None
+    link_dir = Path(tempfile.mkdtemp(prefix="emulated-rig-")) if own_dir else args.link_dir
+    link_dir.mkdir(parents=True, exist_ok=True)
     ports: dict[str, dict[str, Any]] = {}
+    emulators: dict[str, Emulator] = {}
+    ptys: dict[str, _PtyDevice] = {}
     can_params = {"interface": args.can_interface, "channel": args.can_channel}
-    if args.keller_pty:
-        endpoint = PtyEndpoint()
-        rig.attach(
-            KellerEmulator(
-                rig, endpoint, address=args.keller_address, reference=args.keller_reference
-            )
-        )
-        ports["keller_serial"] = {
-            "port": endpoint.slave_path,
-            "address": args.keller_address,
-            "reference": args.keller_reference,
-        }
-    if args.dac_pty:
-        endpoint = PtyEndpoint()
-        rig.attach(DacBridgeEmulator(rig, endpoint))
-        ports["dac_serial"] = {"port": endpoint.slave_path}
-    if args.adc_pty:
-        endpoint = PtyEndpoint()
-        rig.attach(LaserAdcSerialEmulator(rig, endpoint))
-        ports["adc_serial"] = {"port": endpoint.slave_path}
-    if args.canopen:
-        bus = CanTransport(**can_params)
-        rig.attach(CanopenAoEmulator(rig, bus, node_id=args.canopen_node_id))
-        ports["canopen"] = {**can_params, "node_id": args.canopen_node_id}
-    if args.adc_can:
-        bus = CanTransport(**can_params)
-        rig.attach(LaserAdcCanEmulator(rig, bus, arbitration_id=args.adc_can_id))
-        ports["adc_can"] = {**can_params, "arbitration_id": args.adc_can_id}
+    failsafe_s = args.failsafe_timeout_s
 
+    def add_pty(backend: str, make: Callable[[PtyEndpoint], Emulator]) -> dict[str, Any]:
+        endpoint = PtyEndpoint()
+        emulator = rig.attach(make(endpoint))
+        emulators[backend] = emulator
+        ptys[backend] = _PtyDevice(emulator, endpoint, link_dir / backend)
+        return {"port": str(ptys[backend].link)}
+
+    try:
+        if args.keller_pty:
+            where = add_pty(
+                "keller_serial",
+                lambda ep: KellerEmulator(
+                    rig, ep, address=args.keller_address, reference=args.keller_reference
+                ),
+            )
+            ports["keller_serial"] = {
+                **where,
+                "address": args.keller_address,
+                "reference": args.keller_reference,
+            }
+        if args.dac_pty:
+            ports["dac_serial"] = add_pty(
+                "dac_serial",
+                lambda ep: DacBridgeEmulator(rig, ep, failsafe_timeout_s=failsafe_s),
+            )
+        if args.adc_pty:
+            ports["adc_serial"] = add_pty("adc_serial", lambda ep: LaserAdcSerialEmulator(rig, ep))
+        if args.canopen:
+            bus = CanTransport(**can_params)
+            emulators["canopen"] = rig.attach(
+                CanopenAoEmulator(
+                    rig, bus, node_id=args.canopen_node_id, failsafe_timeout_s=failsafe_s
+                )
+            )
+            ports["canopen"] = {**can_params, "node_id": args.canopen_node_id}
+        if args.adc_can:
+            bus = CanTransport(**can_params)
+            emulators["adc_can"] = rig.attach(
+                LaserAdcCanEmulator(rig, bus, arbitration_id=args.adc_can_id)
+            )
+            ports["adc_can"] = {**can_params, "arbitration_id": args.adc_can_id}
+        return _run(rig, ports, _Control(rig, emulators, ptys))
+    finally:
+        for device in ptys.values():
+            with contextlib.suppress(OSError):
+                device.link.unlink()
+        if own_dir:
+            shutil.rmtree(link_dir, ignore_errors=True)
+
+
+def _run(rig: EmulatedRig, ports: dict[str, dict[str, Any]], control: _Control) -> int:
     done = threading.Event()
 
     def _on_signal(signum: int, _frame: object) -> None:
@@ -271,6 +496,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         rig.stop()
         return 1
     print(json.dumps(ports), flush=True)
+    # Commands on stdin; at EOF (no controller, or stdin is /dev/null) the rig just runs on.
+    threading.Thread(
+        target=control.serve, args=(sys.stdin, sys.stdout), name="rig-control", daemon=True
+    ).start()
     try:
         while not done.wait(0.5):
             if not rig.running:
