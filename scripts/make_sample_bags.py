@@ -40,7 +40,11 @@ def record(signal: str, bag: Path, domain: int) -> None:
     env = {"ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     specs = sim_graph_specs(bag, describe(signal), with_compensator=False)
     specs[0].params["compression"] = "zstd"  # the recorder; keeps the repository small
-    excite = NodeSpec("excite", "catheter_control.excite_node", {"signal": signal, "tail_s": 1.0})
+    excite = NodeSpec(
+        "excite",
+        "catheter_control.excite_node",
+        {"signal": signal, "tail_s": 1.0, "min_subscribers": 2},  # the rig and the recorder
+    )
     with ProcessGraph(specs, env=env, log_dir=bag.parent / f".logs-{signal}") as graph:
         time.sleep(2.0)  # let the recorder match every publisher before the first sample
         print(f"{signal}: recording to {bag}", flush=True)

@@ -19,7 +19,7 @@ from catheter_control import qos
 from catheter_driver import diagnostics, messages
 from catheter_driver.loop_node import LoopNode
 from catheter_driver.node_main import run_node
-from catheter_driver.params import declare_float, declare_plain
+from catheter_driver.params import declare_float, declare_int, declare_plain
 from catheter_models.contract import PRESSURE_COMMAND
 from catheter_models.errors import SignalError
 from catheter_models.plant.config import ParamSpec
@@ -34,6 +34,7 @@ from catheter_models.units import AMBIENT_PRESSURE_PA
 _RATE = ParamSpec("rate_hz", 250.0, 10.0, 2000.0, "command rate [Hz]")
 _PMAX = ParamSpec("max_pressure_pa", 3.0e5, 0.0, 6.0e5, "refuse signals above this, gauge [Pa]")
 _TAIL = ParamSpec("tail_s", 1.0, 0.0, 60.0, "zero pressure held after the signal [s]")
+_LEAD_IN = ParamSpec("lead_in_s", 0.5, 0.0, 60.0, "zero pressure sent before the signal [s]")
 _WAIT = ParamSpec("wait_for_subscriber_s", 10.0, 0.0, 600.0, "wait this long for a listener [s]")
 _SLEW = ParamSpec(
     "ramp_down_pa_per_s", 2.0e5, 1.0e3, 1.0e7, "slew of the ramp to zero after a signal [Pa/s]"
@@ -61,6 +62,17 @@ class ExciteNode(LoopNode):
         tail_s = declare_float(self, "tail_s", _TAIL)
         ramp_pa_per_s = declare_float(self, "ramp_down_pa_per_s", _SLEW)
         self.wait_s = declare_float(self, "wait_for_subscriber_s", _WAIT)
+        # Discovery is pairwise: one matched subscriber says nothing about the others. A
+        # recording needs the rig *and* the recorder, so wait for as many as are expected.
+        self.min_subscribers = declare_int(
+            self,
+            "min_subscribers",
+            1,
+            low=1,
+            high=100,
+            doc="start once this many subscribe to the command topic (rig + recorder = 2)",
+        )
+        lead_in_s = declare_float(self, "lead_in_s", _LEAD_IN)
         self.ambient_pa = declare_float(self, "ambient_pressure_pa", _AMB)
         if name == "training":
             specs = training_set()
@@ -68,7 +80,8 @@ class ExciteNode(LoopNode):
             specs = clstm_training_set()
         else:
             specs = tuple(get_preset(n.strip()) for n in name.split(","))
-        pieces = []
+        # Zero pressure first: a listener that matched a moment late misses rest, not signal.
+        pieces = [np.zeros(round(lead_in_s * self.rate_hz))]
         tail = np.zeros(round(tail_s * self.rate_hz))
         for spec in specs:
             if spec.kind != "pressure":
@@ -107,12 +120,13 @@ class ExciteNode(LoopNode):
     def _tick(self, k: int, deadline_s: float) -> None:
         if self._first_k is None:
             # Commands into the void are not data acquisition: wait for the rig to listen.
-            if self._pub.get_subscription_count() > 0:
+            if self._pub.get_subscription_count() >= self.min_subscribers:
                 self._first_k = k
             elif deadline_s > self._wait_until_s:
                 self.failure = (
-                    f"nobody subscribes to {self.resolve_topic_name(PRESSURE_COMMAND.name)} "
-                    f"after {self.wait_s:g} s; is the rig (or sim_hardware) running?"
+                    f"{self._pub.get_subscription_count()} of {self.min_subscribers} expected "
+                    f"subscribers on {self.resolve_topic_name(PRESSURE_COMMAND.name)} after "
+                    f"{self.wait_s:g} s; is the rig (or sim_hardware) running?"
                 )
                 self.done.set()
             return
