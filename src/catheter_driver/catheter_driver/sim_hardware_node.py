@@ -13,7 +13,7 @@ import time
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import FluidPressure, JointState, Range
 
-from catheter_driver import diagnostics, messages
+from catheter_driver import diagnostics, messages, qos
 from catheter_driver.loop_node import LoopNode
 from catheter_driver.node_main import run_node
 from catheter_driver.params import declare_float, declare_int, declare_plain
@@ -71,7 +71,7 @@ class SimHardwareNode(LoopNode):
         self._pub_angle = self.create_publisher(JointState, TIP_ANGLE.name, qos_profile_sensor_data)
         self._pub_diag = diagnostics.create_diagnostics_publisher(self)
         self.create_subscription(
-            FluidPressure, PRESSURE_COMMAND.name, self._on_command, qos_profile_sensor_data
+            FluidPressure, PRESSURE_COMMAND.name, self._on_command, qos.KEEP_EVERY_SAMPLE
         )
         self.hw.plant.warm_up()
         self._samples_done = 0

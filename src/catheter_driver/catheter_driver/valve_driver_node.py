@@ -21,7 +21,7 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import FluidPressure
 from std_srvs.srv import SetBool, Trigger
 
-from catheter_driver import diagnostics, messages
+from catheter_driver import diagnostics, messages, qos
 from catheter_driver.devices.factory import make_transmitter, make_valve
 from catheter_driver.lifecycle_util import device_options
 from catheter_driver.node_main import run_node
@@ -70,8 +70,10 @@ class ValveDriverNode(LifecycleNode):
             FluidPressure, PRESSURE_MEASURED.name, qos_profile_sensor_data
         )
         self._pub_diag = diagnostics.create_diagnostics_publisher(self)
+        # Every command is counted (and every NaN refused and reported), so none may be
+        # dropped in the queue while this thread is busy.
         self.create_subscription(
-            FluidPressure, PRESSURE_COMMAND.name, self._on_command, qos_profile_sensor_data
+            FluidPressure, PRESSURE_COMMAND.name, self._on_command, qos.KEEP_EVERY_SAMPLE
         )
         self.create_service(Trigger, "~/vent", self._on_vent)
         if self.allow_enable:
