@@ -23,7 +23,6 @@ from catheter_driver import diagnostics, messages
 from catheter_driver.loop_node import LoopNode
 from catheter_driver.node_main import run_node
 from catheter_driver.params import declare_float, declare_plain
-from catheter_models import __version__
 from catheter_models.contract import ANGLE_DESIRED, BEND_JOINT, PRESSURE_COMMAND, TRAJECTORY
 from catheter_models.errors import CatheterError, ParameterError
 from catheter_models.plant.config import ParamSpec
@@ -186,7 +185,6 @@ class CompensatorNode(LoopNode):
                 "lateness_p50_ms": f"{stats.lateness_p50_s * 1e3:.3f}",
                 "lateness_p99_ms": f"{stats.lateness_p99_s * 1e3:.3f}",
                 "compute_p99_ms": f"{stats.compute_p99_s * 1e3:.3f}",
-                "software_version": __version__,
             },
         )
 

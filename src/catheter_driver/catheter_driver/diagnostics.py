@@ -8,6 +8,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 from rclpy.publisher import Publisher
 
+from catheter_models import __version__
 from catheter_models.contract import DIAGNOSTICS
 
 OK = DiagnosticStatus.OK
@@ -35,7 +36,10 @@ def publish_status(
     status.name = node.get_fully_qualified_name().lstrip("/")
     status.message = message
     status.hardware_id = hardware_id
-    status.values = [KeyValue(key=str(k), value=str(v)) for k, v in values.items()]
+    # Every status says which software produced it, so a log from the rig can be matched
+    # to a release.
+    stamped = {**values, "software_version": __version__}
+    status.values = [KeyValue(key=str(k), value=str(v)) for k, v in stamped.items()]
     array = DiagnosticArray()
     array.header.stamp = node.get_clock().now().to_msg()
     array.status = [status]

@@ -26,7 +26,6 @@ from catheter_driver.lifecycle_util import device_options
 from catheter_driver.node_main import run_node
 from catheter_driver.params import declare_float, declare_plain
 from catheter_driver.rt_loop import DeadlineLoop, MonotonicStamper
-from catheter_models import __version__
 from catheter_models.contract import PRESSURE_MEASURED, TIP_ANGLE, TIP_DISTANCE
 from catheter_models.errors import CatheterError
 from catheter_models.geometry import LaserGeometry
@@ -252,7 +251,6 @@ class LaserAngleNode(LifecycleNode):
                 values["straight_distance_mm"] = f"{core.calibration.straight_distance_m * 1e3:.3f}"
                 values["zeroed_at"] = core.calibration.zeroed_at
             values.update({f"adc.{k}": v for k, v in core.adc.counters.as_dict().items()})
-        values["software_version"] = __version__
         message = self._state + (f": {self._reason}" if self._reason else "")
         diagnostics.publish_status(
             self._pub_diag,

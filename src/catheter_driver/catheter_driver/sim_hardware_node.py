@@ -18,7 +18,6 @@ from catheter_driver.loop_node import LoopNode
 from catheter_driver.node_main import run_node
 from catheter_driver.params import declare_float, declare_int, declare_plain
 from catheter_driver.sim_hardware import SimHardware
-from catheter_models import __version__
 from catheter_models.contract import PRESSURE_COMMAND, PRESSURE_MEASURED, TIP_ANGLE, TIP_DISTANCE
 from catheter_models.plant.config import EFFECTS, RIG_PARAMS, ParamSpec, PlantConfig
 
@@ -127,7 +126,6 @@ class SimHardwareNode(LoopNode):
             "samples": stats.ticks,
             "missed_deadlines": stats.missed,
             "lateness_p99_ms": f"{stats.lateness_p99_s * 1e3:.3f}",
-            "software_version": __version__,
         }
         values.update(self.config.describe())
         diagnostics.publish_status(

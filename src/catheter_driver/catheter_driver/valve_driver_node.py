@@ -28,7 +28,6 @@ from catheter_driver.node_main import run_node
 from catheter_driver.params import declare_float, declare_plain
 from catheter_driver.rt_loop import DeadlineLoop, MonotonicStamper
 from catheter_driver.valve_core import ValveDriverCore
-from catheter_models import __version__
 from catheter_models.contract import PRESSURE_COMMAND, PRESSURE_MEASURED
 from catheter_models.errors import CatheterError
 from catheter_models.plant.config import ParamSpec
@@ -251,7 +250,6 @@ class ValveDriverNode(LifecycleNode):
                 values["valve_readback_bar"] = f"{readback / 1e5:.4f}"
             for name, link in (("valve", core.valve), ("transmitter", core.transmitter)):
                 values.update({f"{name}.{k}": v for k, v in link.device.counters.as_dict().items()})
-        values["software_version"] = __version__
         message = self._last_tick_state + (f": {self._last_reason}" if self._last_reason else "")
         if core is not None and not core.transmitter.up:
             # pressure/measured has stopped: not OK, even while the valve follows commands.
