@@ -775,3 +775,58 @@ def test_unplugged_valve_vents_by_failsafe_and_reconnects(bench: FaultBench) -> 
     status = bench.wait_status(lambda s: _values(s)["state"] == "ok", 3.0, n_diag)
     assert _values(status)["valve.reconnects"] == "1", _values(status)
     assert _values(status)["valve_link"] == "up"
+
+
+# -- 2c: lifecycle transitions, driven through the real lifecycle services -------------------
+def _change_state(bench: FaultBench, transition_id: int) -> bool:
+    """Ask valve_driver for a lifecycle transition (lifecycle_msgs/ChangeState); its answer."""
+    from lifecycle_msgs.msg import Transition
+    from lifecycle_msgs.srv import ChangeState
+
+    client = bench.probe.node.create_client(ChangeState, f"/{VALVE_DRIVER}/change_state")
+    assert bench.probe.spin_until(client.service_is_ready, 10.0), "no change_state service"
+    future = client.call_async(ChangeState.Request(transition=Transition(id=transition_id)))
+    assert bench.probe.spin_until(future.done, 10.0), f"transition {transition_id} hung"
+    bench.probe.node.destroy_client(client)
+    return bool(future.result().success)
+
+
+def _state_label(bench: FaultBench) -> str:
+    from lifecycle_msgs.srv import GetState
+
+    client = bench.probe.node.create_client(GetState, f"/{VALVE_DRIVER}/get_state")
+    assert bench.probe.spin_until(client.service_is_ready, 10.0), "no get_state service"
+    future = client.call_async(GetState.Request())
+    assert bench.probe.spin_until(future.done, 10.0)
+    bench.probe.node.destroy_client(client)
+    return str(future.result().current_state.label)
+
+
+def test_lifecycle_transitions_leave_the_valve_vented(bench: FaultBench) -> None:
+    from lifecycle_msgs.msg import Transition
+
+    # Autostart brought the node to active; it follows commands.
+    assert _state_label(bench) == "active"
+    bench.follow(2.0e5)
+
+    # Deactivate while commands keep streaming: the valve vents and stays vented.
+    assert _change_state(bench, Transition.TRANSITION_DEACTIVATE)
+    assert _state_label(bench) == "inactive"
+    bench.wait_rig(lambda s: s["muscle_pa"] < VENTED_PA, 2.0)
+    bench.probe.spin_for(0.5)
+    assert bench.rig.state()["muscle_pa"] < VENTED_PA, "an inactive driver moved the valve"
+    bench.wait_status(lambda s: "deactivated: valve vented" in s.message, 3.0)
+
+    # Activate again: the still-streaming commands are followed.
+    assert _change_state(bench, Transition.TRANSITION_ACTIVATE)
+    bench.follow(2.0e5)
+
+    # Deactivate and clean up: devices closed, valve vented; configure + activate recovers.
+    assert _change_state(bench, Transition.TRANSITION_DEACTIVATE)
+    assert _change_state(bench, Transition.TRANSITION_CLEANUP)
+    assert _state_label(bench) == "unconfigured"
+    bench.wait_rig(lambda s: s["muscle_pa"] < VENTED_PA, 2.0)
+    assert _change_state(bench, Transition.TRANSITION_CONFIGURE)
+    assert _change_state(bench, Transition.TRANSITION_ACTIVATE)
+    assert _state_label(bench) == "active"
+    bench.follow(2.0e5)
