@@ -67,9 +67,15 @@ class Device(ABC):
         """Open the link and initialise the device. Raises DeviceError if it cannot.
 
         Every successful open after the first counts as a reconnect, here and only here, so
-        a driver that re-opens a lost device never counts it twice.
+        a driver that re-opens a lost device never counts it twice. A failed open records
+        the error and closes whatever was half opened, also here, for every backend.
         """
-        self._open()
+        try:
+            self._open()
+        except DeviceError as exc:
+            self.counters.last_error = str(exc)
+            self.close()
+            raise
         if self._opened_before:
             self.counters.reconnects += 1
         self._opened_before = True

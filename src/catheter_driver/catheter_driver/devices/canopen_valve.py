@@ -105,14 +105,9 @@ class CanopenValve(ValveSetpoint):
 
     def _open(self) -> None:
         """Open the bus and start the node (NMT), if configured."""
-        try:
-            self.transport.open()
-            if self.nmt_start:
-                self.transport.send(*canopen_ao.encode_nmt_start(self.node_id))
-        except DeviceError as exc:
-            self.counters.last_error = str(exc)
-            self.transport.close()
-            raise
+        self.transport.open()
+        if self.nmt_start:
+            self.transport.send(*canopen_ao.encode_nmt_start(self.node_id))
         self.last_read_back_raw = None
         self.last_read_back_s = None
 

@@ -76,13 +76,8 @@ class DacBridgeValve(ValveSetpoint):
 
     def _open(self) -> None:
         """Open the line and ask the bridge for its output (proves it answers)."""
-        try:
-            self.transport.open()
-            self._transact(dac_bridge.encode_get(), dac_bridge.CMD_GET_REPLY)
-        except DeviceError as exc:
-            self.counters.last_error = str(exc)
-            self.transport.close()
-            raise
+        self.transport.open()
+        self._transact(dac_bridge.encode_get(), dac_bridge.CMD_GET_REPLY)
 
     def close(self) -> None:
         """Close the line."""

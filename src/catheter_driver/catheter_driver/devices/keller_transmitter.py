@@ -114,13 +114,8 @@ class KellerTransmitter(PressureTransmitter):
             DeviceTimeout: the device does not answer F48.
             DeviceError: the port cannot be opened or the device refuses F48.
         """
-        try:
-            self.transport.open()
-            self._initialise()
-        except DeviceError as exc:
-            self.counters.last_error = str(exc)
-            self.transport.close()
-            raise
+        self.transport.open()
+        self._initialise()
 
     def close(self) -> None:
         """Close the line."""

@@ -58,11 +58,7 @@ class ThreadedLaserAdc(LaserAdc):
     def _open(self) -> None:
         """Open the link and start the reader thread."""
         self.close()
-        try:
-            self._open_link()
-        except DeviceError as exc:
-            self.counters.last_error = str(exc)
-            raise
+        self._open_link()
         with self._cond:
             self._samples.clear()
             self._error = None
