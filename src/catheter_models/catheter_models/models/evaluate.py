@@ -1,0 +1,129 @@
+"""Score models the thesis's way: modelling on test signals, control with the plant in the loop.
+
+``modelling_score``: a forward model predicts the bend for a recorded pressure signal
+(Tables 8.1-8.4). ``tracking_score``: an inverse model runs as an open-loop feedforward
+compensator, one sample at a time through its *stream* (as the compensator node runs it),
+its commands limited as the node limits them, and the simulated plant answers
+(Tables 11.1-11.4). Metrics are in SI (rad, or Pa for an inverse model's modelling score),
+as everywhere in the stack; ``metrics.format("deg")`` prints them as the thesis does.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from catheter_models.metrics import ErrorMetrics, compute_metrics
+from catheter_models.models.base import FloatArray, Model, Recording, Stream
+from catheter_models.plant import Plant, PlantConfig
+from catheter_models.signals import SignalSpec, get_preset
+
+# The compensator node's defaults (catheter_control.compensator_node): the same limits here
+# keep a benchmark honest about what the node would have commanded.
+DEFAULT_MAX_PRESSURE_PA = 3.0e5
+DEFAULT_MAX_SLEW_PA_PER_S = 20.0e5
+
+
+@dataclass(frozen=True, eq=False)
+class ModellingResult:
+    """A forward model against a measured recording (angles in rad)."""
+
+    recording: Recording
+    predicted_rad: FloatArray
+    metrics: ErrorMetrics
+
+
+@dataclass(frozen=True, eq=False)
+class TrackingResult:
+    """An open-loop compensator on the plant.
+
+    Attributes:
+        trajectory: The preset's name.
+        t_s: Sample times [s].
+        desired_rad: Set-point [rad].
+        command_pa: What the compensator commanded after limits [Pa gauge].
+        measured_rad: The laser's angle [rad] (what the thesis scores).
+        metrics: RMSE / MAE (max abs) / NRMSE of measured vs desired [rad].
+    """
+
+    trajectory: str
+    t_s: FloatArray
+    desired_rad: FloatArray
+    command_pa: FloatArray
+    measured_rad: FloatArray
+    metrics: ErrorMetrics
+
+
+def modelling_score(model: Model, recording: Recording) -> ModellingResult:
+    """Predict ``recording``'s output from its input and score it in degrees."""
+    predicted = model.predict_recording(recording)
+    _, measured = recording.io(model.direction)
+    metrics = compute_metrics(predicted, measured)
+    return ModellingResult(recording, predicted, metrics)
+
+
+def run_compensator(
+    stream: Stream,
+    desired_rad: FloatArray,
+    *,
+    rate_hz: float,
+    max_pressure_pa: float = DEFAULT_MAX_PRESSURE_PA,
+    max_slew_pa_per_s: float = DEFAULT_MAX_SLEW_PA_PER_S,
+) -> FloatArray:
+    """Step ``stream`` through ``desired_rad`` from rest, clamping and slew-limiting like the node.
+
+    A non-finite output stops the run at zero pressure, as the node's ControlCore does.
+    """
+    stream.reset()
+    out = np.zeros(desired_rad.size)
+    last = 0.0
+    step = max_slew_pa_per_s / rate_hz
+    for k, angle in enumerate(desired_rad):
+        target = stream.step(float(angle))
+        if not np.isfinite(target):
+            break
+        target = min(max(target, 0.0), max_pressure_pa)
+        last = min(max(target, last - step), last + step)
+        out[k] = last
+    return out
+
+
+def tracking_score(
+    model: Model,
+    trajectory: SignalSpec | str,
+    config: PlantConfig | None = None,
+    *,
+    max_pressure_pa: float = DEFAULT_MAX_PRESSURE_PA,
+    max_slew_pa_per_s: float = DEFAULT_MAX_SLEW_PA_PER_S,
+) -> TrackingResult:
+    """Follow a thesis trajectory open loop: ``model``'s stream drives the simulated plant.
+
+    Args:
+        model: An inverse model (angle -> pressure) fitted at the plant's sample rate.
+        trajectory: An angle preset (``traj_*``) or its name.
+        config: The plant; default: the thesis rig, seed 0.
+        max_pressure_pa: Command ceiling [Pa gauge], as the node's.
+        max_slew_pa_per_s: Command slew limit [Pa/s], as the node's.
+    """
+    spec = get_preset(trajectory) if isinstance(trajectory, str) else trajectory
+    config = config or PlantConfig.thesis_rig()
+    rate_hz = float(config.rig["sample_rate_hz"])
+    if model.direction != "inverse":
+        raise ValueError(f"{model.kind} is a forward model; tracking needs an inverse model")
+    if abs(model.fitted_rate_hz - rate_hz) > 1e-9:
+        msg = f"{model.kind} works at {model.fitted_rate_hz:g} Hz, the plant at {rate_hz:g} Hz"
+        raise ValueError(msg)
+    signal = spec.generate(rate_hz)
+    desired = np.asarray(signal.values_si)
+    command = run_compensator(
+        model.stream(),
+        desired,
+        rate_hz=rate_hz,
+        max_pressure_pa=max_pressure_pa,
+        max_slew_pa_per_s=max_slew_pa_per_s,
+    )
+    out = Plant(config).simulate(command)
+    measured = np.asarray(out.angle_rad)
+    metrics = compute_metrics(measured, desired)
+    return TrackingResult(spec.name, np.asarray(signal.t_s), desired, command, measured, metrics)
