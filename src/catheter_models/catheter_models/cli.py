@@ -2,20 +2,31 @@
 
     catheter-lab bag info BAG              what a bag holds (topics, rates, metadata)
     catheter-lab bag repair BAG [-o OUT]   recover a bag whose recorder was killed
-    catheter-lab simulate SIGNAL -o BAG    offline data: a thesis signal through the
-                                           simulated rig, written as a contract bag
+    catheter-lab simulate SIGNAL... -o BAG offline data: thesis signals through the
+                                           simulated rig, written as contract bags
     catheter-lab effects                   the physical effects the plant and lab know
+    catheter-lab train KIND --train BAG... -o DIR
+                                           identify a thesis model from bags (playback
+                                           for training) into a model directory
+    catheter-lab models                    the model kinds and their settings
 
-The training, comparison and diagnosis commands join with the models and lab issues.
+The comparison and diagnosis commands join with the lab issue.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
+import time
+from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from catheter_models.errors import CatheterError
+
+if TYPE_CHECKING:
+    from catheter_models.plant import PlantConfig
 
 
 def _cmd_bag_info(args: argparse.Namespace) -> int:
@@ -47,27 +58,63 @@ def _parse_effects(items: list[str]) -> dict[str, dict[str, float]]:
     return out
 
 
+# Named groups of presets: the thesis's training sets and test signals.
+SIGNAL_SETS = {
+    "@training": "training_set",
+    "@clstm_training": "clstm_training_set",
+    "@model_tests": "TEST_PRESSURE_SIGNALS",
+}
+
+
+def _expand_signals(names: list[str]) -> list[str]:
+    from catheter_models import signals
+
+    out: list[str] = []
+    for name in names:
+        if name in SIGNAL_SETS:
+            group = getattr(signals, SIGNAL_SETS[name])
+            specs = group() if callable(group) else group
+            out.extend(s if isinstance(s, str) else s.name for s in specs)
+        else:
+            out.append(name)
+    return out
+
+
 def _cmd_simulate(args: argparse.Namespace) -> int:
-    import numpy as np
+    from catheter_models.plant import PlantConfig
 
-    from catheter_models.bag import write_bag_from_arrays
-    from catheter_models.plant import Plant, PlantConfig
-    from catheter_models.signals import get_preset
-
-    spec = get_preset(args.signal)
-    if spec.kind != "pressure":
-        raise CatheterError(f"{args.signal!r} is an angle trajectory; simulate drives pressure")
+    names = _expand_signals(args.signal)
     config = PlantConfig.thesis_rig(seed=args.seed)
     for name, params in _parse_effects(args.effect).items():
         config = config.with_effect(name, enabled=True, **params)
     for name in args.no_effect:
         config = config.with_effect(name, enabled=False)
+    if len(names) == 1:
+        _simulate_one(names[0], config, args.output)
+        return 0
+    # Several signals: one bag each under the output directory, each run with its own noise.
+    args.output.mkdir(parents=True, exist_ok=True)
+    for i, name in enumerate(names):
+        _simulate_one(name, replace(config, seed=args.seed + i), args.output / name)
+    return 0
+
+
+def _simulate_one(signal_name: str, config: PlantConfig, output: Path) -> None:
+    import numpy as np
+
+    from catheter_models.bag import write_bag_from_arrays
+    from catheter_models.plant import Plant
+    from catheter_models.signals import get_preset
+
+    spec = get_preset(signal_name)
+    if spec.kind != "pressure":
+        raise CatheterError(f"{signal_name!r} is an angle trajectory; simulate drives pressure")
     signal = spec.generate(config.rig["sample_rate_hz"])
     out = Plant(config).simulate(signal.values_si)
     custom = {"signal": spec.name, "signal_params": repr(dict(spec.params())), "source": "simulate"}
     custom |= {f"plant.{k}": v for k, v in config.describe().items()}
     write_bag_from_arrays(
-        args.output,
+        output,
         np.asarray(out.t_s),
         out.pressure_command_pa,
         out.pressure_measured_pa,
@@ -76,7 +123,71 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         custom_data=custom,
         compression="zstd",
     )
-    print(f"{spec.name}: {signal.duration_s:.1f} s simulated, bag written to {args.output}")
+    print(f"{spec.name}: {signal.duration_s:.1f} s simulated, bag written to {output}")
+
+
+def _parse_settings(items: list[str]) -> dict[str, Any]:
+    """``n_play=12`` ``form="windowed"`` -> {name: value}; values parse as JSON, else text."""
+    out: dict[str, Any] = {}
+    for item in items:
+        key, eq, text = item.partition("=")
+        if not eq or not key:
+            raise CatheterError(f"--set {item!r}: expected NAME=VALUE")
+        try:
+            out[key] = json.loads(text)
+        except json.JSONDecodeError:
+            out[key] = text
+    return out
+
+
+def _cmd_train(args: argparse.Namespace) -> int:
+    from catheter_models.models import model_class
+    from catheter_models.models.data import recordings_from_bags
+    from catheter_models.models.evaluate import modelling_score
+
+    cls = model_class(args.kind)
+    if args.output.exists() and any(args.output.iterdir()):
+        raise CatheterError(f"{args.output} exists and is not empty; choose a new directory")
+    train = recordings_from_bags(args.train, rate_hz=args.rate_hz)
+    validation = recordings_from_bags(args.validate, rate_hz=args.rate_hz)
+    try:
+        model = cls(**_parse_settings(args.set))
+    except TypeError as exc:
+        raise CatheterError(f"{args.kind}: {exc}; see `catheter-lab models`") from None
+    n = sum(len(r) for r in train)
+    print(f"{args.kind}: training on {len(train)} bag(s), {n} samples at {args.rate_hz:g} Hz")
+    start = time.perf_counter()
+    model.fit(train, validation, progress=not args.quiet)
+    took_s = time.perf_counter() - start
+    unit = "deg" if cls.direction == "forward" else "bar"
+    metrics: dict[str, Any] = {"train_time_s": took_s}
+    for rec in validation:
+        score = modelling_score(model, rec).metrics
+        metrics[f"validation.{rec.name}"] = {
+            "rmse": score.rmse,
+            "mae": score.mae,
+            "nrmse": score.nrmse,
+        }
+        print(f"  validation {rec.name}: {score.format(unit)}")
+    model.save(args.output, training=train, metrics=metrics)
+    print(f"{args.kind}: trained in {took_s:.1f} s, model written to {args.output}")
+    return 0
+
+
+def _cmd_models(_args: argparse.Namespace) -> int:
+    import inspect
+
+    from catheter_models.models import MODEL_KINDS, model_class
+
+    for kind in MODEL_KINDS:
+        cls = model_class(kind)
+        doc = (cls.__doc__ or "").strip().splitlines()[0]
+        print(f"{kind}  ({cls.direction}) {doc}")
+        for name, param in inspect.signature(cls.__init__).parameters.items():
+            if name == "self" or param.kind in (param.VAR_KEYWORD, param.VAR_POSITIONAL):
+                continue
+            default = "" if param.default is param.empty else f" = {param.default!r}"
+            print(f"    {name}{default}")
     return 0
 
 
@@ -107,8 +218,18 @@ def build_parser() -> argparse.ArgumentParser:
     repair.set_defaults(func=_cmd_bag_repair)
 
     sim = sub.add_parser("simulate", help="a thesis pressure signal through the simulated rig")
-    sim.add_argument("signal", help="pressure preset, e.g. train_zero_f0.2")
-    sim.add_argument("-o", "--output", type=Path, required=True, help="new bag directory")
+    sim.add_argument(
+        "signal",
+        nargs="+",
+        help="pressure preset(s), e.g. train_zero_f0.2, or a set: " + ", ".join(SIGNAL_SETS),
+    )
+    sim.add_argument(
+        "-o",
+        "--output",
+        type=Path,
+        required=True,
+        help="new bag directory (several signals: a directory of bags, one per signal)",
+    )
     sim.add_argument("--seed", type=int, default=0)
     sim.add_argument(
         "--effect",
@@ -128,6 +249,41 @@ def build_parser() -> argparse.ArgumentParser:
 
     effects = sub.add_parser("effects", help="list the physical effects and their parameters")
     effects.set_defaults(func=_cmd_effects)
+
+    train = sub.add_parser(
+        "train",
+        help="identify a model from bags into a model directory",
+        description=(
+            "Identify a thesis model (drdpi, gpi, idrdpi, svr, lstm, clstm) from recorded "
+            "bags. Forward models learn pressure/command -> tip/angle; inverse models "
+            "(idrdpi, clstm) learn tip/angle -> pressure/command. Settings are the model's "
+            "constructor arguments (`catheter-lab models` lists them)."
+        ),
+    )
+    train.add_argument("kind", help="model kind: drdpi, gpi, idrdpi, svr, lstm, clstm")
+    train.add_argument("--train", nargs="+", type=Path, required=True, metavar="BAG")
+    train.add_argument(
+        "--validate",
+        nargs="*",
+        type=Path,
+        default=[],
+        metavar="BAG",
+        help="held-out bags, scored after training and recorded in the manifest",
+    )
+    train.add_argument("-o", "--output", type=Path, required=True, help="new model directory")
+    train.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a model setting (JSON value), e.g. --set n_play=12; repeatable",
+    )
+    train.add_argument("--rate-hz", type=float, default=250.0, help="resampling rate [Hz]")
+    train.add_argument("--quiet", action="store_true", help="no progress bar")
+    train.set_defaults(func=_cmd_train)
+
+    models = sub.add_parser("models", help="list the model kinds and their settings")
+    models.set_defaults(func=_cmd_models)
     return parser
 
 

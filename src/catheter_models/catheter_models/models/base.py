@@ -209,8 +209,7 @@ def check_rates(kind: str, recordings: Sequence[Recording], rate_hz: float | Non
     """All recordings share one rate (and equal ``rate_hz`` if given); returns it."""
     if not recordings:
         raise InsufficientDataError(f"{kind}: no recordings given")
-    rates = sorted({r.rate_hz for r in recordings})
-    expected = rate_hz if rate_hz is not None else rates[0]
+    expected = rate_hz if rate_hz is not None else recordings[0].rate_hz
     off = [r for r in recordings if not math.isclose(r.rate_hz, expected, rel_tol=1e-6)]
     if off:
         raise RateMismatchError(
@@ -255,6 +254,10 @@ class Model(ABC):
     kind: ClassVar[str]
     direction: ClassVar[Direction]
     requirement: ClassVar[DataRequirement] = DataRequirement(min_samples=2_500)
+    preview_samples: int = 0
+    """How far ahead of now an inverse model reads its set-point [samples] (0: none). A
+    compensator follows a plan it knows in advance, so a model may be trained to read the
+    desired angle a few samples early and so cover the valve's and muscle's lag."""
 
     rate_hz_: float
     fit_report_: FitReport
@@ -312,6 +315,10 @@ class Model(ABC):
     @abstractmethod
     def _from_payload(cls, manifest: Manifest, payload: Mapping[str, bytes]) -> Self:
         """Rebuild a fitted model from a verified directory."""
+
+    def settings(self) -> dict[str, Any]:
+        """The model's settings (constructor arguments), as the manifest records them."""
+        return dict(self._settings())
 
     def _normalization(self) -> dict[str, Any]:
         """Normalisation constants for the manifest (override where used)."""

@@ -70,17 +70,21 @@ def run_compensator(
     rate_hz: float,
     max_pressure_pa: float = DEFAULT_MAX_PRESSURE_PA,
     max_slew_pa_per_s: float = DEFAULT_MAX_SLEW_PA_PER_S,
+    preview_samples: int = 0,
 ) -> FloatArray:
     """Step ``stream`` through ``desired_rad`` from rest, clamping and slew-limiting like the node.
 
-    A non-finite output stops the run at zero pressure, as the node's ControlCore does.
+    A non-finite output stops the run at zero pressure, as the node's ControlCore does. A
+    compensator with a preview is fed the set-point ``preview_samples`` ahead (held at the
+    plan's last value), as the node feeds it from the plan it knows in advance.
     """
     stream.reset()
-    out = np.zeros(desired_rad.size)
+    n = desired_rad.size
+    out = np.zeros(n)
     last = 0.0
     step = max_slew_pa_per_s / rate_hz
-    for k, angle in enumerate(desired_rad):
-        target = stream.step(float(angle))
+    for k in range(n):
+        target = stream.step(float(desired_rad[min(k + preview_samples, n - 1)]))
         if not np.isfinite(target):
             break
         target = min(max(target, 0.0), max_pressure_pa)
@@ -122,6 +126,7 @@ def tracking_score(
         rate_hz=rate_hz,
         max_pressure_pa=max_pressure_pa,
         max_slew_pa_per_s=max_slew_pa_per_s,
+        preview_samples=model.preview_samples,
     )
     out = Plant(config).simulate(command)
     measured = np.asarray(out.angle_rad)
