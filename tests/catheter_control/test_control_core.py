@@ -16,9 +16,12 @@ DT = 1.0 / RATE_HZ
 class LinearCompensator:
     """1 bar per 10 deg, remembers resets; stands in for any streaming compensator."""
 
-    def __init__(self, scale_pa_per_rad: float = 1e5 / math.radians(10)) -> None:
+    def __init__(
+        self, scale_pa_per_rad: float = 1e5 / math.radians(10), preview_s: float = 0.0
+    ) -> None:
         self.scale = scale_pa_per_rad
         self.resets = 0
+        self.preview_s = preview_s
 
     def reset(self) -> None:
         self.resets += 1
@@ -112,3 +115,17 @@ def test_static_inverse_compensator_inverts_the_curve() -> None:
     assert comp.step(math.radians(17.5)) == pytest.approx(2.5e5)
     # Zero bend sits at the edge of motion, not at zero pressure.
     assert comp.step(0.0) == pytest.approx(1e5)
+
+
+def test_a_previewing_compensator_reads_the_plan_ahead() -> None:
+    """The model sees the set-point preview_s early; the published set-point is today's."""
+    plain, ahead = LinearCompensator(), LinearCompensator(preview_s=0.1)
+    outs = {}
+    for name, comp in (("plain", plain), ("ahead", ahead)):
+        core = ControlCore(comp, 0.0, 3e5, 1e9)
+        core.start(ramp_plan(peak_deg=20.0, duration_s=2.0), 0.0)
+        outs[name] = [o for o in run(core, 0.0, 200) if o is not None]
+    k = 100  # t = 0.4 s on the rising ramp (20 deg/s before smoothing)
+    assert outs["ahead"][k].angle_desired_rad == outs["plain"][k].angle_desired_rad
+    assert outs["ahead"][k].pressure_pa == pytest.approx(outs["plain"][k + 25].pressure_pa)
+    assert outs["ahead"][k].pressure_pa > outs["plain"][k].pressure_pa

@@ -67,7 +67,7 @@ class CompensatorNode(LoopNode):
         self._pending: tuple[TrajectoryPlan, float] | None = None
         self.kind = kind
         self.core = ControlCore(
-            load_compensator(kind, model_dir),
+            load_compensator(kind, model_dir, self.rate_hz),
             pmin,
             pmax,
             declare_float(self, "max_slew_pa_per_s", _SLEW),

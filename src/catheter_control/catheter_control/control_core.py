@@ -17,7 +17,13 @@ from catheter_models.static_map import StaticMap
 
 
 class StreamingCompensator(Protocol):
-    """A feedforward compensator that carries its state from tick to tick."""
+    """A feedforward compensator that carries its state from tick to tick.
+
+    ``preview_s`` is how far ahead of now it reads the plan [s]: a model trained to see the
+    set-point early covers the valve's and muscle's lag (0 for none).
+    """
+
+    preview_s: float
 
     def reset(self) -> None:
         """Forget all state (a new run starts from rest)."""
@@ -28,6 +34,8 @@ class StreamingCompensator(Protocol):
 
 class StaticInverseCompensator:
     """No hysteresis compensation: the inverse of the quasi-static curve (the baseline)."""
+
+    preview_s = 0.0
 
     def __init__(self, static_map: StaticMap) -> None:
         self.static_map = static_map
@@ -118,7 +126,9 @@ class ControlCore:
                 self.state = self.RAMPING_DOWN
             else:
                 self._last_angle = self.plan.desired_at(elapsed)
-                target = self.compensator.step(self._last_angle)
+                preview_s = self.compensator.preview_s
+                ahead = self.plan.desired_at(elapsed + preview_s) if preview_s else self._last_angle
+                target = self.compensator.step(ahead)
                 if not math.isfinite(target):
                     # A broken model must not move the catheter: ramp down and say why.
                     self.nonfinite_from_compensator += 1

@@ -1,17 +1,25 @@
-"""Compensators the node can host, chosen by name, and the models shipped with the package."""
+"""Compensators the node can host, chosen by name, and the models shipped with the package.
+
+``none`` is the static inverse of the quasi-static curve (no hysteresis compensation), the
+baseline. ``idrdpi`` and ``clstm`` are the thesis's compensators: any inverse model
+directory written by ``catheter-lab train`` (hash-checked on load); the c-LSTM runs on ONNX
+Runtime, so the node never imports torch.
+"""
 
 from __future__ import annotations
 
+import math
 from importlib import resources
 from pathlib import Path
 
 from catheter_control.control_core import StaticInverseCompensator, StreamingCompensator
 from catheter_models.errors import ParameterError
+from catheter_models.models.base import Stream
 from catheter_models.static_map import StaticMap
 
-COMPENSATORS = ("none",)
-"""``none``: the static inverse of the quasi-static curve (no hysteresis compensation).
-The c-LSTM and inverse DRDPI join with the models issue."""
+COMPENSATORS = ("none", "idrdpi", "clstm")
+SHIPPED = {"none": "static_map", "idrdpi": "idrdpi", "clstm": "clstm"}
+"""The model directory shipped for each compensator (fitted on the simulated rig)."""
 
 
 def shipped_model_dir(name: str = "static_map") -> Path:
@@ -19,9 +27,53 @@ def shipped_model_dir(name: str = "static_map") -> Path:
     return Path(str(resources.files("catheter_control") / "data" / name))
 
 
-def load_compensator(kind: str, model_dir: str) -> StreamingCompensator:
-    """Build the named compensator from a model directory ('' = the shipped default)."""
+class ModelCompensator:
+    """An inverse model's stream as the node's compensator.
+
+    Args:
+        stream: The model's stateful stepper (desired angle [rad] in, pressure [Pa] out).
+        preview_s: How far ahead the model reads the plan [s].
+        label: What the node reports it runs.
+    """
+
+    def __init__(self, stream: Stream, preview_s: float, label: str) -> None:
+        self._stream = stream
+        self.preview_s = preview_s
+        self.label = label
+
+    def reset(self) -> None:
+        """Back to rest: a new run starts from a vented muscle."""
+        self._stream.reset()
+
+    def step(self, angle_desired_rad: float) -> float:
+        """Pressure command [Pa] for the (previewed) desired bend."""
+        return float(self._stream.step(angle_desired_rad))
+
+
+def load_compensator(
+    kind: str, model_dir: str, control_rate_hz: float | None = None
+) -> StreamingCompensator:
+    """Build the named compensator from a model directory ('' = the shipped one).
+
+    Raises:
+        ParameterError: Unknown kind, a model of another kind or direction, or a model
+            fitted at another rate than the control loop steps it.
+        ModelDirError: The directory is missing, malformed, or fails its hash check.
+    """
+    if kind not in COMPENSATORS:
+        raise ParameterError(f"unknown compensator {kind!r}; available: {', '.join(COMPENSATORS)}")
+    path = Path(model_dir) if model_dir else shipped_model_dir(SHIPPED[kind])
     if kind == "none":
-        path = Path(model_dir) if model_dir else shipped_model_dir("static_map")
         return StaticInverseCompensator(StaticMap.load(path))
-    raise ParameterError(f"unknown compensator {kind!r}; available: {', '.join(COMPENSATORS)}")
+    from catheter_models.models import model_class
+
+    model = model_class(kind).load(path)
+    if model.direction != "inverse":
+        raise ParameterError(f"{path} holds a {model.kind} forward model, not a compensator")
+    rate_hz = model.fitted_rate_hz
+    if control_rate_hz is not None and not math.isclose(rate_hz, control_rate_hz, rel_tol=1e-6):
+        raise ParameterError(
+            f"{path}: the {kind} model was fitted at {rate_hz:g} Hz and must be stepped at that "
+            f"rate, but control_rate_hz is {control_rate_hz:g} Hz"
+        )
+    return ModelCompensator(model.stream(), model.preview_samples / rate_hz, f"{kind} ({path})")
