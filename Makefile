@@ -5,7 +5,8 @@ BIN := $(VENV)/bin
 PY := $(BIN)/python
 PRESET ?= traj_descending_sine
 
-.PHONY: setup demo test test-fast test-slow lint typecheck bench figures sample-bags colcon clean
+.PHONY: setup demo test test-fast test-slow lint typecheck bench bench-models figures sample-bags \
+	shipped-models colcon clean
 
 setup: $(VENV)/.installed
 
@@ -38,6 +39,17 @@ typecheck: setup
 
 bench: setup
 	$(PY) bench/bench_plant.py
+
+## The thesis's tables (8.1-8.4 modelling, 11.1-11.4 control) redone on the simulated rig,
+## plus identification speed. About 25 minutes on 2 cores; see docs/benchmarks.md.
+bench-models: setup
+	$(PY) bench/bench_drdpi_identification.py
+	$(PY) bench/bench_modelling.py
+	$(PY) bench/bench_control.py
+
+## Retrain the compensators shipped in catheter_control/data (c-LSTM, IDRDPI) from bags.
+shipped-models: setup
+	$(PY) scripts/train_shipped_models.py
 
 figures: setup
 	$(PY) scripts/plot_thesis_figures.py
