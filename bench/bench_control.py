@@ -38,12 +38,10 @@ from thesis_tables import CONTROL, TRAINING_TIME_S
 from catheter_control.control_core import StaticInverseCompensator
 from catheter_control.models import shipped_model_dir
 from catheter_models.cli import main as lab_main
-from catheter_models.metrics import compute_metrics
 from catheter_models.models import Model, load_model, model_class
 from catheter_models.models.data import recording_from_bag, recordings_from_bags
-from catheter_models.models.evaluate import TrackingResult, run_compensator, tracking_score
-from catheter_models.plant import Plant, PlantConfig
-from catheter_models.signals import TEST_TRAJECTORIES, get_preset
+from catheter_models.models.evaluate import TrackingResult, track, tracking_score
+from catheter_models.signals import TEST_TRAJECTORIES
 from catheter_models.static_map import StaticMap
 
 REPO = Path(__file__).resolve().parents[1]
@@ -54,15 +52,8 @@ IDRDPI_METHODS = ("analytic", "gpi", "direct")
 
 def static_inverse_score(trajectory: str) -> TrackingResult:
     """The baseline: the shipped static inverse (no hysteresis compensation) on the plant."""
-    config = PlantConfig.thesis_rig()
-    rate_hz = float(config.rig["sample_rate_hz"])
-    signal = get_preset(trajectory).generate(rate_hz)
-    desired = np.asarray(signal.values_si)
     stream = StaticInverseCompensator(StaticMap.load(shipped_model_dir("static_map")))
-    command = run_compensator(stream, desired, rate_hz=rate_hz)
-    measured = np.asarray(Plant(config).simulate(command).angle_rad)
-    metrics = compute_metrics(measured, desired)
-    return TrackingResult(trajectory, np.asarray(signal.t_s), desired, command, measured, metrics)
+    return track(stream, trajectory)
 
 
 def train_clstm(quick: bool) -> tuple[Model, float]:
