@@ -17,7 +17,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from catheter_control import qos
 from catheter_control.control_core import ControlCore
-from catheter_control.models import COMPENSATORS, load_compensator
+from catheter_control.models import COMPENSATORS, DEFAULT_COMPENSATOR, load_compensator
 from catheter_control.trajectory import TrajectoryLimits, TrajectoryPlan
 from catheter_driver import diagnostics, messages
 from catheter_driver.loop_node import LoopNode
@@ -50,7 +50,11 @@ class CompensatorNode(LoopNode):
 
     def __init__(self) -> None:
         super().__init__("compensator")
-        kind = str(declare_plain(self, "compensator", "none", f"one of {', '.join(COMPENSATORS)}"))
+        kind = str(
+            declare_plain(
+                self, "compensator", DEFAULT_COMPENSATOR, f"one of {', '.join(COMPENSATORS)}"
+            )
+        )
         model_dir = str(declare_plain(self, "model_dir", "", "model directory ('' = shipped)"))
         self.rate_hz = declare_float(self, "control_rate_hz", _RATE)
         pmin = declare_float(self, "min_pressure_pa", _PMIN)

@@ -20,6 +20,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from catheter_control.models import COMPENSATORS, DEFAULT_COMPENSATOR, SHIPPED
 from catheter_control.trajectory import (
     TrajectoryLimits,
     TrajectoryPlan,
@@ -65,6 +66,16 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
         "--emulated-rig",
         action="store_true",
         help="bring up emulated devices and the real valve_driver and laser_angle first",
+    )
+    parser.add_argument(
+        "--compensator",
+        choices=COMPENSATORS,
+        default=DEFAULT_COMPENSATOR,
+        help="with --sim/--emulated-rig: the compensator the started graph hosts "
+        "(clstm: the shipped c-LSTM; idrdpi: the shipped inverse DRDPI; none: static inverse)",
+    )
+    parser.add_argument(
+        "--model-dir", default="", help="model directory for the compensator ('' = shipped)"
     )
     parser.add_argument("--out", type=Path, help="run directory (default runs/<time>-<name>)")
     parser.add_argument("--namespace", default=DEFAULT_NAMESPACE)
@@ -120,11 +131,18 @@ def main(argv: list[str] | None = None) -> int:
             "signal": name,
             "signal_params": repr(signal_params),
             "hardware": hardware,
-            "compensator": "none (static inverse)",
+            "compensator": args.compensator,
+            "model_dir": args.model_dir or f"shipped ({SHIPPED[args.compensator]})",
         }
         run_dir.mkdir(parents=True, exist_ok=True)
         specs = sim_graph_specs(
-            bag_path, custom, compensator_params={"control_rate_hz": args.control_rate_hz}
+            bag_path,
+            custom,
+            compensator_params={
+                "control_rate_hz": args.control_rate_hz,
+                "compensator": args.compensator,
+                "model_dir": args.model_dir,
+            },
         )
         if args.emulated_rig:
             devices = EmulatedDevices()

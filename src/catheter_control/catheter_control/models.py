@@ -18,6 +18,8 @@ from catheter_models.models.base import Stream
 from catheter_models.static_map import StaticMap
 
 COMPENSATORS = ("none", "idrdpi", "clstm")
+DEFAULT_COMPENSATOR = "clstm"
+"""The thesis's best compensator (Tables 11.1-11.4), and ours on the simulated rig."""
 SHIPPED = {"none": "static_map", "idrdpi": "idrdpi", "clstm": "clstm"}
 """The model directory shipped for each compensator (fitted on the simulated rig)."""
 
