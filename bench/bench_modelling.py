@@ -42,13 +42,26 @@ FIGURES = REPO / "docs" / "figures" / "benchmarks"
 MODELS: list[tuple[str, str, dict[str, Any]]] = [
     ("drdpi", "drdpi", {}),
     ("svr", "svr", {}),
-    ("lstm", "lstm", {"form": "streaming"}),
-    ("lstm (windowed, thesis form)", "lstm", {"form": "windowed"}),
+    (
+        "lstm",
+        "lstm",
+        {
+            "form": "streaming",
+            "time_budget_s": 300.0,
+            "validation_split": "time",
+            "patience_epochs": 80,
+        },
+    ),
+    (
+        "lstm (windowed, thesis form)",
+        "lstm",
+        {"form": "windowed", "time_budget_s": 300.0, "validation_split": "time"},
+    ),
 ]
 QUICK: dict[str, dict[str, Any]] = {
-    "drdpi": {"max_time_s": 10.0},
+    "drdpi": {"budget": {"max_generations": 20, "popsize": 5}},
     "svr": {"grid_samples": 800, "fit_samples": 2000},
-    "lstm": {"max_time_s": 20.0},
+    "lstm": {"time_budget_s": 20.0},
 }
 
 
