@@ -49,7 +49,7 @@ import json
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any, ClassVar, Final, Self
 
 import numpy as np
@@ -76,6 +76,7 @@ from catheter_models.models.identify import (
     identify,
     stack_recordings,
 )
+from catheter_models.models.params import ParameterSet
 from catheter_models.units import deg_to_rad, pa_to_bar, rad_to_deg
 
 PARAM_NAMES: Final = (
@@ -206,7 +207,7 @@ PARAMS_FORMAT: Final = "catheter_models.drdpi/1"
 
 
 @dataclass(frozen=True)
-class DRDPIParams:
+class DRDPIParams(ParameterSet):
     """Table 5.1's 12 parameters of a DRDPI-structure chain.
 
     Units are those of a forward DRDPI (:data:`FORWARD_UNITS`): bar in, degrees out. An
@@ -241,52 +242,9 @@ class DRDPIParams:
     a0: float
     g0: float
 
-    def __post_init__(self) -> None:
-        for name in PARAM_NAMES:
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float, np.floating)):
-                raise ParameterError(f"DRDPI parameter {name} = {value!r} is not a number")
-            value = float(value)
-            low, high, open_low, why = _VALIDITY[name]
-            low_ok = value > low if open_low else value >= low
-            if not (math.isfinite(value) and low_ok and value <= high):
-                bracket = "(" if open_low else "["
-                raise ParameterError(
-                    f"DRDPI parameter {name} = {value!r} is outside {bracket}{low:g}, "
-                    f"{high:g}]: {why}"
-                )
-            object.__setattr__(self, name, value)
-
-    def as_array(self) -> FloatArray:
-        """The parameters as a vector in Table 5.1's order."""
-        return np.array([getattr(self, n) for n in PARAM_NAMES], dtype=np.float64)
-
-    @classmethod
-    def from_array(cls, theta: npt.ArrayLike) -> DRDPIParams:
-        """From a vector in Table 5.1's order (validated)."""
-        values = np.asarray(theta, dtype=np.float64).ravel()
-        if values.size != len(PARAM_NAMES):
-            raise ParameterError(
-                f"a DRDPI needs {len(PARAM_NAMES)} parameters {list(PARAM_NAMES)}, "
-                f"got {values.size}"
-            )
-        return cls(*(float(v) for v in values))
-
-    def to_dict(self) -> dict[str, float]:
-        """``{name: value}`` in Table 5.1's order."""
-        return {f.name: float(getattr(self, f.name)) for f in fields(self)}
-
-    @classmethod
-    def from_dict(cls, raw: Mapping[str, Any]) -> DRDPIParams:
-        """From ``{name: value}``; every name required, no other accepted."""
-        unknown = sorted(set(raw) - set(PARAM_NAMES))
-        missing = [n for n in PARAM_NAMES if n not in raw]
-        if unknown or missing:
-            raise ParameterError(
-                f"DRDPI parameters: unknown {unknown}, missing {missing}; "
-                f"expected exactly {list(PARAM_NAMES)}"
-            )
-        return cls(**{n: raw[n] for n in PARAM_NAMES})
+    label = "DRDPI"
+    table = "Table 5.1"
+    validity = _VALIDITY
 
 
 def rate_alpha(rate_filter_s: float, rate_hz: float) -> float:

@@ -21,7 +21,7 @@ import json
 import math
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any, ClassVar, Final, Self
 
 import numpy as np
@@ -48,6 +48,7 @@ from catheter_models.models.identify import (
     identify,
     stack_recordings,
 )
+from catheter_models.models.params import ParameterSet
 from catheter_models.units import bar_to_pa, deg_to_rad, pa_to_bar, rad_to_deg
 
 GPI_PARAM_NAMES: Final = ("c0", "c1", "c2", "c3", "beta", "rho", "tau", "q")
@@ -111,7 +112,7 @@ GPI_PARAMS_FORMAT: Final = "catheter_models.gpi/1"
 
 
 @dataclass(frozen=True)
-class GPIParams:
+class GPIParams(ParameterSet):
     """Table 9.1's 8 parameters (units in :data:`GPI_UNITS`).
 
     Attributes:
@@ -134,52 +135,9 @@ class GPIParams:
     tau: float
     q: float
 
-    def __post_init__(self) -> None:
-        for name in GPI_PARAM_NAMES:
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float, np.floating)):
-                raise ParameterError(f"GPI parameter {name} = {value!r} is not a number")
-            value = float(value)
-            low, high, open_low, why = _VALIDITY[name]
-            low_ok = value > low if open_low else value >= low
-            if not (math.isfinite(value) and low_ok and value <= high):
-                bracket = "(" if open_low else "["
-                raise ParameterError(
-                    f"GPI parameter {name} = {value!r} is outside {bracket}{low:g}, {high:g}]: "
-                    f"{why}"
-                )
-            object.__setattr__(self, name, value)
-
-    def as_array(self) -> FloatArray:
-        """The parameters as a vector in Table 9.1's order."""
-        return np.array([getattr(self, n) for n in GPI_PARAM_NAMES], dtype=np.float64)
-
-    @classmethod
-    def from_array(cls, theta: npt.ArrayLike) -> GPIParams:
-        """From a vector in Table 9.1's order (validated)."""
-        values = np.asarray(theta, dtype=np.float64).ravel()
-        if values.size != len(GPI_PARAM_NAMES):
-            raise ParameterError(
-                f"a GPI needs {len(GPI_PARAM_NAMES)} parameters {list(GPI_PARAM_NAMES)}, "
-                f"got {values.size}"
-            )
-        return cls(*(float(v) for v in values))
-
-    def to_dict(self) -> dict[str, float]:
-        """``{name: value}`` in Table 9.1's order."""
-        return {f.name: float(getattr(self, f.name)) for f in fields(self)}
-
-    @classmethod
-    def from_dict(cls, raw: Mapping[str, Any]) -> GPIParams:
-        """From ``{name: value}``; every name required, no other accepted."""
-        unknown = sorted(set(raw) - set(GPI_PARAM_NAMES))
-        missing = [n for n in GPI_PARAM_NAMES if n not in raw]
-        if unknown or missing:
-            raise ParameterError(
-                f"GPI parameters: unknown {unknown}, missing {missing}; "
-                f"expected exactly {list(GPI_PARAM_NAMES)}"
-            )
-        return cls(**{n: raw[n] for n in GPI_PARAM_NAMES})
+    label = "GPI"
+    table = "Table 9.1"
+    validity = _VALIDITY
 
 
 def gpi_coefficients(params: GPIParams, n_play: int) -> FloatArray:
