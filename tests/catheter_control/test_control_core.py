@@ -129,3 +129,20 @@ def test_a_previewing_compensator_reads_the_plan_ahead() -> None:
     assert outs["ahead"][k].angle_desired_rad == outs["plain"][k].angle_desired_rad
     assert outs["ahead"][k].pressure_pa == pytest.approx(outs["plain"][k + 25].pressure_pa)
     assert outs["ahead"][k].pressure_pa > outs["plain"][k].pressure_pa
+
+
+def test_a_compensator_that_raises_ramps_down_and_says_why() -> None:
+    class Raising(LinearCompensator):
+        def step(self, angle_desired_rad: float) -> float:
+            if angle_desired_rad > math.radians(5.0):
+                raise RuntimeError("onnxruntime: session lost")
+            return super().step(angle_desired_rad)
+
+    core = ControlCore(Raising(), 0.0, 3e5, 5e5)
+    core.start(ramp_plan(), 0.0)
+    outs = [o for o in run(core, 0.0, 600) if o is not None]
+    assert all(math.isfinite(o.pressure_pa) and o.pressure_pa >= 0.0 for o in outs)
+    assert outs[-1].pressure_pa == 0.0
+    assert core.state == ControlCore.IDLE
+    assert core.nonfinite_from_compensator >= 1
+    assert core.compensator_error == "RuntimeError: onnxruntime: session lost"

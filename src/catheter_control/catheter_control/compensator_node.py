@@ -163,13 +163,14 @@ class CompensatorNode(LoopNode):
         with self._lock:
             refusals, last, accepted = self._refusals, self._last_refusal, self._accepted
             state, bad_model = self.core.state, self.core.nonfinite_from_compensator
+            model_error = self.core.compensator_error
         level, message = diagnostics.OK, state
         if self.loop.error is not None:
             level, message = diagnostics.ERROR, f"control loop died: {self.loop.error!r}"
         elif bad_model:
             level, message = (
                 diagnostics.ERROR,
-                "compensator produced non-finite pressure; ramped down",
+                f"compensator failed ({model_error or 'non-finite pressure'}); ramped down",
             )
         elif refusals:
             level, message = diagnostics.WARN, f"trajectory refused: {last}"

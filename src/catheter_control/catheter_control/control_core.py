@@ -92,6 +92,7 @@ class ControlCore:
         self._last_angle = 0.0
         self.state = self.IDLE
         self.nonfinite_from_compensator = 0
+        self.compensator_error = ""
 
     def start(self, plan: TrajectoryPlan, now_s: float) -> None:
         """Follow ``plan`` from ``now_s``; pre-empts any plan in progress.
@@ -128,7 +129,13 @@ class ControlCore:
                 self._last_angle = self.plan.desired_at(elapsed)
                 preview_s = self.compensator.preview_s
                 ahead = self.plan.desired_at(elapsed + preview_s) if preview_s else self._last_angle
-                target = self.compensator.step(ahead)
+                try:
+                    target = self.compensator.step(ahead)
+                except Exception as exc:
+                    # A model that raises (ONNX Runtime, a refused sample) is as broken as one
+                    # that returns NaN: the valve must not hold the last command.
+                    self.compensator_error = f"{type(exc).__name__}: {exc}"
+                    target = math.nan
                 if not math.isfinite(target):
                     # A broken model must not move the catheter: ramp down and say why.
                     self.nonfinite_from_compensator += 1
