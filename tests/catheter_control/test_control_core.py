@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from catheter_control.control_core import ControlCore, StaticInverseCompensator
+from catheter_control.control_core import ControlCore, SensorWatch, StaticInverseCompensator
 from catheter_control.trajectory import TrajectoryLimits, TrajectoryPlan
 from catheter_models.static_map import StaticMap
 
@@ -22,6 +22,7 @@ class LinearCompensator:
         self.scale = scale_pa_per_rad
         self.resets = 0
         self.preview_s = preview_s
+        self.sample_period_s: float | None = None
 
     def reset(self) -> None:
         self.resets += 1
@@ -146,3 +147,101 @@ def test_a_compensator_that_raises_ramps_down_and_says_why() -> None:
     assert core.state == ControlCore.IDLE
     assert core.nonfinite_from_compensator >= 1
     assert core.compensator_error == "RuntimeError: onnxruntime: session lost"
+
+
+class SampledCompensator(LinearCompensator):
+    """A model fitted at 250 Hz: records every input it is stepped with."""
+
+    def __init__(self, preview_s: float = 0.0) -> None:
+        super().__init__(preview_s=preview_s)
+        self.sample_period_s = DT
+        self.inputs: list[float] = []
+
+    def step(self, angle_desired_rad: float) -> float:
+        self.inputs.append(angle_desired_rad)
+        return super().step(angle_desired_rad)
+
+
+def run_at(core: ControlCore, rate_hz: float, n: int, start_s: float = 0.0) -> list:
+    dt = 1.0 / rate_hz
+    return [core.tick(start_s + k * dt, dt) for k in range(n)]
+
+
+def test_a_250_hz_model_in_a_1_khz_loop_sees_its_own_rate_and_is_interpolated() -> None:
+    slow, fast = SampledCompensator(preview_s=0.02), SampledCompensator(preview_s=0.02)
+    outs = {}
+    for comp, rate in ((slow, 250.0), (fast, 1000.0)):
+        core = ControlCore(comp, 0.0, 3e5, 1e12)
+        core.start(ramp_plan(peak_deg=20.0, duration_s=2.0), 0.0)
+        outs[rate] = [o.pressure_pa for o in run_at(core, rate, round(1.0 * rate))]
+    # The model was stepped on the same plan instants in both loops (plus the one sample it
+    # reads ahead), not four times as often.
+    assert fast.inputs[: len(slow.inputs)] == slow.inputs
+    assert len(fast.inputs) == len(slow.inputs)
+    # At the model's instants the 1 kHz loop commands what the 250 Hz loop commands...
+    np.testing.assert_array_equal(outs[1000.0][::4], outs[250.0])
+    # ...and in between, the straight line to the next model output (no hold, no lag).
+    for k in range(1, 3):
+        expected = np.array(outs[250.0][:-1]) + k / 4 * np.diff(outs[250.0])
+        np.testing.assert_allclose(outs[1000.0][k:-4:4], expected, rtol=1e-12, atol=1e-6)
+
+
+def test_missed_deadlines_still_step_the_model_through_every_sample() -> None:
+    comp = SampledCompensator()
+    core = ControlCore(comp, 0.0, 3e5, 1e12)
+    plan = ramp_plan()
+    core.start(plan, 0.0)
+    ticks = [k for k in range(200) if not 50 <= k < 57]  # a 28 ms stall: 7 ticks skipped
+    for k in ticks:
+        core.tick(k * DT, DT)
+    expected = [plan.desired_at(k * DT) for k in range(200)]
+    assert comp.inputs[:200] == pytest.approx(expected, abs=0.0)
+
+
+def test_preempting_a_sampled_model_starts_from_the_command_in_force() -> None:
+    comp = SampledCompensator()
+    core = ControlCore(comp, 0.0, 3e5, 1e12)
+    core.start(ramp_plan(peak_deg=20.0), 0.0)
+    before = [o.pressure_pa for o in run_at(core, 1000.0, 402)]  # t = 0.401 s, mid-ramp
+    core.start(ramp_plan(peak_deg=10.0), 0.402)
+    after = [o.pressure_pa for o in run_at(core, 1000.0, 8, start_s=0.402)]
+    step = 1e5 / math.radians(10) * math.radians(20.0) / 1.0 * 0.001  # ramp slope per ms
+    assert abs(after[0] - before[-1]) < 2 * step, (before[-1], after[0])
+    assert comp.resets == 1
+
+
+def test_sensor_watch_names_the_stale_stream() -> None:
+    watch = SensorWatch(("pressure/measured", "tip/angle"), timeout_s=0.1)
+    assert watch.stale(0.0) == "pressure/measured required but none received"
+    watch.seen("pressure/measured", 1.0)
+    watch.seen("tip/angle", 1.0)
+    watch.seen("tip/distance", 5.0)  # not required: ignored
+    assert watch.stale(1.05) == ""
+    watch.seen("pressure/measured", 1.1)
+    assert watch.stale(1.15) == "tip/angle stale: no sample for 150 ms (limit 100 ms)"
+    assert watch.age_s("pressure/measured", 1.15) == pytest.approx(0.05)
+    with pytest.raises(ValueError, match="timeout"):
+        SensorWatch(("tip/angle",), 0.0)
+
+
+def test_a_fault_ramps_down_says_why_and_the_next_run_starts_clean() -> None:
+    comp = LinearCompensator()
+    core = ControlCore(comp, 0.0, 3e5, 5e5)
+    core.start(ramp_plan(), 0.0)
+    run(core, 0.0, 250)  # 1 s in: at the 20 deg peak
+    core.fault("tip/angle stale: no sample for 120 ms (limit 100 ms)")
+    outs = [o for o in run(core, 1.0, 250) if o is not None]
+    assert core.state == ControlCore.IDLE and outs[-1].pressure_pa == 0.0
+    diffs = np.diff([o.pressure_pa for o in outs])
+    assert np.all(diffs <= 0.0) and np.all(diffs >= -5e5 * DT - 1e-6)
+    assert core.fault_reason.startswith("tip/angle stale")
+    core.start(ramp_plan(), 3.0)
+    assert core.fault_reason == "" and comp.resets == 2
+    assert core.tick(3.0, DT) is not None and core.state == ControlCore.FOLLOWING
+
+
+def test_a_fault_while_idle_changes_nothing() -> None:
+    core = ControlCore(LinearCompensator(), 0.0, 3e5, 5e5)
+    core.fault("pressure/measured required but none received")
+    assert core.state == ControlCore.IDLE and core.fault_reason == ""
+    assert core.tick(0.0, DT) is None

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from catheter_control.control_core import StaticInverseCompensator
+from catheter_control.control_core import ControlCore, StaticInverseCompensator
 from catheter_control.models import (
     COMPENSATORS,
     DEFAULT_COMPENSATOR,
@@ -16,6 +16,7 @@ from catheter_control.models import (
     load_compensator,
     shipped_model_dir,
 )
+from catheter_control.trajectory import TrajectoryLimits, TrajectoryPlan, preset_knots
 from catheter_models.errors import ParameterError
 from catheter_models.model_dir import ModelDirError
 from catheter_models.models.drdpi import DRDPI, DRDPIParams
@@ -25,7 +26,7 @@ from catheter_models.static_map import StaticMap
 
 @pytest.mark.parametrize("kind", ["idrdpi", "clstm"])
 def test_shipped_compensator_beats_the_static_inverse(kind: str) -> None:
-    comp = load_compensator(kind, "", control_rate_hz=250.0)
+    comp = load_compensator(kind, "")
     assert isinstance(comp, ModelCompensator)
     assert comp.preview_s >= 0.0
     ours = track(comp, "traj_up_chirp").metrics.rmse
@@ -40,9 +41,22 @@ def test_the_default_is_the_c_lstm() -> None:
     assert set(COMPENSATORS) == {"none", "idrdpi", "clstm"}
 
 
-def test_a_model_fitted_at_another_rate_is_refused() -> None:
-    with pytest.raises(ParameterError, match=r"fitted at 250 Hz.*control_rate_hz is 1000 Hz"):
-        load_compensator("clstm", "", control_rate_hz=1000.0)
+def test_the_shipped_c_lstm_in_a_1_khz_loop_is_stepped_at_250_hz() -> None:
+    """The real ONNX c-LSTM: a 1 kHz loop commands what a 250 Hz loop does at its samples."""
+    plan = TrajectoryPlan.from_knots(*preset_knots("traj_up_chirp"), TrajectoryLimits(), 1000.0)
+    commands = {}
+    for rate_hz in (250.0, 1000.0):
+        comp = load_compensator("clstm", "")
+        assert comp.sample_period_s == pytest.approx(1 / 250)
+        core = ControlCore(comp, 0.0, 3e5, 1e12)  # no slew limit: compare the model alone
+        core.start(plan, 0.0)
+        n = round(5.0 * rate_hz)
+        commands[rate_hz] = np.array([core.tick(k / rate_hz, 1 / rate_hz) for k in range(n)])
+        assert core.model_steps == round(5.0 * 250) + 1  # one sample read ahead
+    slow = np.array([o.pressure_pa for o in commands[250.0]])
+    fast = np.array([o.pressure_pa for o in commands[1000.0]])
+    np.testing.assert_allclose(fast[::4], slow, rtol=0, atol=1e-3)
+    assert np.all(np.abs(np.diff(fast)) <= np.abs(np.diff(slow)).max() / 4 + 1e-3)
 
 
 def test_a_tampered_shipped_model_is_refused(tmp_path: Path) -> None:

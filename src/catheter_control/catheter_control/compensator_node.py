@@ -1,9 +1,13 @@
 """``compensator``: turn a desired-angle trajectory into pressure commands on a real-time loop.
 
 Subscribes ``trajectory`` (validated whole before a single command goes out), publishes
-``pressure/command`` and ``angle/desired`` at ``control_rate_hz`` from its own thread against
-absolute monotonic deadlines, and its timing and refusals on ``/diagnostics``.
-Service ``stop`` (std_srvs/Trigger) ramps the pressure down.
+``pressure/command`` and ``angle/desired`` at ``control_rate_hz`` (250 Hz by default; 1 kHz
+works) from its own thread against absolute monotonic deadlines, and its timing, refusals
+and faults on ``/diagnostics``. Service ``~/stop`` (std_srvs/Trigger) ramps the pressure down.
+
+With ``require_pressure_measured`` (default on) or ``require_tip_angle`` (default off: a
+patient has no tip sensor), a run does not start without that stream, and ramps down when it
+has been silent for ``sensor_timeout_s``.
 """
 
 from __future__ import annotations
@@ -11,19 +15,27 @@ from __future__ import annotations
 import threading
 import time
 
+from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import FluidPressure, JointState
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from catheter_control import qos
-from catheter_control.control_core import ControlCore
+from catheter_control.control_core import ControlCore, SensorWatch
 from catheter_control.models import COMPENSATORS, DEFAULT_COMPENSATOR, load_compensator
 from catheter_control.trajectory import TrajectoryLimits, TrajectoryPlan
 from catheter_driver import diagnostics, messages
 from catheter_driver.loop_node import LoopNode
 from catheter_driver.node_main import run_node
 from catheter_driver.params import declare_float, declare_plain
-from catheter_models.contract import ANGLE_DESIRED, BEND_JOINT, PRESSURE_COMMAND, TRAJECTORY
+from catheter_models.contract import (
+    ANGLE_DESIRED,
+    BEND_JOINT,
+    PRESSURE_COMMAND,
+    PRESSURE_MEASURED,
+    TIP_ANGLE,
+    TRAJECTORY,
+)
 from catheter_models.errors import CatheterError, ParameterError
 from catheter_models.plant.config import ParamSpec
 from catheter_models.units import AMBIENT_PRESSURE_PA, deg_to_rad
@@ -41,6 +53,9 @@ _ACC = ParamSpec(
 )
 _WAIT = ParamSpec(
     "driver_wait_s", 5.0, 0.0, 60.0, "hold a plan this long for a valve driver to listen [s]"
+)
+_STALE = ParamSpec(
+    "sensor_timeout_s", 0.1, 0.01, 5.0, "ramp down when a required sensor is silent this long [s]"
 )
 _AMB = ParamSpec("ambient_pressure_pa", AMBIENT_PRESSURE_PA, 5.0e4, 1.2e5, "ambient pressure [Pa]")
 
@@ -68,10 +83,28 @@ class CompensatorNode(LoopNode):
         )
         self.ambient_pa = declare_float(self, "ambient_pressure_pa", _AMB)
         self.driver_wait_s = declare_float(self, "driver_wait_s", _WAIT)
+        required = tuple(
+            spec.name
+            for spec, default, why in (
+                (PRESSURE_MEASURED, True, "the valve driver's transmitter"),
+                (TIP_ANGLE, False, "the laser (a patient has no tip sensor)"),
+            )
+            if declare_plain(
+                self,
+                f"require_{spec.name.replace('/', '_')}",
+                default,
+                f"stop when {spec.name} ({why}) goes stale",
+            )
+        )
+        self.watch = SensorWatch(required, declare_float(self, "sensor_timeout_s", _STALE))
         self._pending: tuple[TrajectoryPlan, float] | None = None
         self.kind = kind
+        compensator = load_compensator(kind, model_dir)
+        self.model_rate_hz = (
+            0.0 if compensator.sample_period_s is None else 1.0 / compensator.sample_period_s
+        )
         self.core = ControlCore(
-            load_compensator(kind, model_dir, self.rate_hz),
+            compensator,
             pmin,
             pmax,
             declare_float(self, "max_slew_pa_per_s", _SLEW),
@@ -87,10 +120,22 @@ class CompensatorNode(LoopNode):
         self.create_subscription(
             JointTrajectory, TRAJECTORY.name, self._on_trajectory, qos.TRAJECTORY
         )
+        for spec, msg_type in ((PRESSURE_MEASURED, FluidPressure), (TIP_ANGLE, JointState)):
+            if spec.name in required:
+                self.create_subscription(
+                    msg_type,
+                    spec.name,
+                    lambda _msg, name=spec.name: self.watch.seen(name, time.monotonic()),
+                    qos_profile_sensor_data,
+                )
         self.create_service(Trigger, "~/stop", self._on_stop)
         self.create_timer(1.0, self._publish_diagnostics)
         self.create_loop(self.rate_hz, self._tick)
-        self.get_logger().info(f"compensator {kind!r} at {self.rate_hz:g} Hz")
+        model_rate = f", model stepped at {self.model_rate_hz:g} Hz" if self.model_rate_hz else ""
+        self.get_logger().info(
+            f"compensator {kind!r} at {self.rate_hz:g} Hz{model_rate}; "
+            f"requires {', '.join(required) or 'no sensor stream'}"
+        )
 
     def _refuse(self, reason: str) -> None:
         with self._lock:
@@ -134,22 +179,30 @@ class CompensatorNode(LoopNode):
         return resp
 
     def _tick(self, _k: int, deadline_s: float) -> None:
-        refusal = ""
+        refusal = fault = ""
         with self._lock:
+            stale = self.watch.stale(deadline_s)
             if self._pending is not None:
                 plan, give_up_s = self._pending
-                if self._pub_cmd.get_subscription_count() > 0:
+                listening = self._pub_cmd.get_subscription_count() > 0
+                if listening and not stale:
                     self.core.start(plan, deadline_s)
                     self._pending = None
                 elif deadline_s > give_up_s:
                     self._pending = None
-                    refusal = (
+                    refusal = stale or (
                         f"no valve driver subscribes to "
                         f"{self._pub_cmd.topic_name} after {self.driver_wait_s:g} s"
                     )
+            if stale and self.core.state != ControlCore.IDLE and not self.core.fault_reason:
+                self.core.fault(stale)
+                fault = stale
             out = self.core.tick(deadline_s, self.loop.period_s)
         if refusal:
             self._refuse(refusal)
+        if fault:
+            # Off the hot path in spirit: this happens once per fault, not per tick.
+            self.get_logger().error(f"ramping down: {fault}")
         if out is None:
             return
         stamp_ns = self.stamp_ns(deadline_s)
@@ -163,10 +216,14 @@ class CompensatorNode(LoopNode):
         with self._lock:
             refusals, last, accepted = self._refusals, self._last_refusal, self._accepted
             state, bad_model = self.core.state, self.core.nonfinite_from_compensator
-            model_error = self.core.compensator_error
+            model_error, fault = self.core.compensator_error, self.core.fault_reason
+            model_steps = self.core.model_steps
+        now_s = time.monotonic()
         level, message = diagnostics.OK, state
         if self.loop.error is not None:
             level, message = diagnostics.ERROR, f"control loop died: {self.loop.error!r}"
+        elif fault:
+            level, message = diagnostics.ERROR, f"stopped: {fault}; ramped down"
         elif bad_model:
             level, message = (
                 diagnostics.ERROR,
@@ -182,6 +239,10 @@ class CompensatorNode(LoopNode):
             values={
                 "state": state,
                 "compensator": self.kind,
+                "control_rate_hz": f"{self.rate_hz:g}",
+                "model_rate_hz": f"{self.model_rate_hz:g}" if self.model_rate_hz else "any",
+                "model_steps": model_steps,
+                "fault": fault,
                 "trajectories_accepted": accepted,
                 "trajectories_refused": refusals,
                 "last_refusal": last,
@@ -189,7 +250,12 @@ class CompensatorNode(LoopNode):
                 "missed_deadlines": stats.missed,
                 "lateness_p50_ms": f"{stats.lateness_p50_s * 1e3:.3f}",
                 "lateness_p99_ms": f"{stats.lateness_p99_s * 1e3:.3f}",
+                "compute_p50_ms": f"{stats.compute_p50_s * 1e3:.3f}",
                 "compute_p99_ms": f"{stats.compute_p99_s * 1e3:.3f}",
+                **{
+                    f"{name.replace('/', '_')}_age_ms": f"{self.watch.age_s(name, now_s) * 1e3:.0f}"
+                    for name in self.watch.required
+                },
             },
         )
 

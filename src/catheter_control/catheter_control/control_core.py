@@ -2,8 +2,14 @@
 
 Every tick takes the desired bend at the current time, asks the streaming compensator for a
 pressure, then clamps it to the configured range and limits its slew. Once the plan has run
-out (or a stop was asked for) it ramps the pressure down to zero at the slew limit and goes
-idle: the valve driver's watchdog does the rest.
+out (or a stop was asked for, or a required sensor went stale) it ramps the pressure down to
+zero at the slew limit and goes idle: the valve driver's watchdog does the rest.
+
+A model fitted at one sample rate is stepped at that rate whatever the loop's rate: it reads
+the plan at its own sample instants (the plan is known ahead, so it can step one sample early)
+and the loop interpolates between its outputs. A 250 Hz c-LSTM in a 1 kHz loop thus sees
+exactly the inputs it was trained on, and the valve gets a smooth command every millisecond
+with no added lag.
 """
 
 from __future__ import annotations
@@ -20,10 +26,13 @@ class StreamingCompensator(Protocol):
     """A feedforward compensator that carries its state from tick to tick.
 
     ``preview_s`` is how far ahead of now it reads the plan [s]: a model trained to see the
-    set-point early covers the valve's and muscle's lag (0 for none).
+    set-point early covers the valve's and muscle's lag (0 for none). ``sample_period_s`` is
+    the period it must be stepped at (the rate it was fitted at), or None for a stateless map
+    that may be evaluated at any instant.
     """
 
     preview_s: float
+    sample_period_s: float | None
 
     def reset(self) -> None:
         """Forget all state (a new run starts from rest)."""
@@ -36,6 +45,7 @@ class StaticInverseCompensator:
     """No hysteresis compensation: the inverse of the quasi-static curve (the baseline)."""
 
     preview_s = 0.0
+    sample_period_s: float | None = None
 
     def __init__(self, static_map: StaticMap) -> None:
         self.static_map = static_map
@@ -70,6 +80,10 @@ class ControlCore:
     FOLLOWING = "following"
     RAMPING_DOWN = "ramping_down"
 
+    _PHASE_TOLERANCE = 1e-6
+    """Fraction of a model period below which a tick counts as on a model sample instant
+    (absolute deadlines put ticks on the grid to ~1e-12 s; this only absorbs rounding)."""
+
     def __init__(
         self,
         compensator: StreamingCompensator,
@@ -82,6 +96,9 @@ class ControlCore:
                 "need 0 <= min_pressure_pa <= max_pressure_pa, "
                 f"got {min_pressure_pa}, {max_pressure_pa}"
             )
+        period = compensator.sample_period_s
+        if period is not None and not (math.isfinite(period) and period > 0.0):
+            raise ValueError(f"compensator sample_period_s must be > 0 s or None, got {period}")
         self.compensator = compensator
         self.min_pressure_pa = min_pressure_pa
         self.max_pressure_pa = max_pressure_pa
@@ -89,20 +106,39 @@ class ControlCore:
         self.plan: TrajectoryPlan | None = None
         self._start_s = 0.0
         self._last_pa = 0.0
+        self._last_target_pa = 0.0
         self._last_angle = 0.0
+        # Model clock (sampled compensators): outputs at plan instants k and k + 1 periods.
+        self._k = 0
+        self._y0 = 0.0
+        self._y1 = 0.0
+        self._primed = False
         self.state = self.IDLE
         self.nonfinite_from_compensator = 0
         self.compensator_error = ""
+        self.fault_reason = ""
+        """Why the last run was cut short by :meth:`fault` ('' if it was not)."""
+        self.model_steps = 0
+        """Compensator steps taken (one per model sample, not per tick)."""
 
     def start(self, plan: TrajectoryPlan, now_s: float) -> None:
         """Follow ``plan`` from ``now_s``; pre-empts any plan in progress.
 
         The compensator is reset only from rest: pre-empting mid-motion keeps its memory of
-        the catheter's current state, which a hysteresis compensator needs.
+        the catheter's current state, which a hysteresis compensator needs. The new plan's
+        model clock starts at the command in force, so the switch has no jump but the slew.
         """
         if self.state == self.IDLE:
             self.compensator.reset()
             self._last_pa = 0.0
+            self._last_target_pa = 0.0
+            self._primed = False
+            self.fault_reason = ""
+        else:
+            # Mid-motion: interpolate from the target in force to the new plan's next sample.
+            self._y1 = self._last_target_pa
+            self._primed = self.state == self.FOLLOWING
+        self._k = -1 if self._primed else 0
         self.plan = plan
         self._start_s = now_s
         self.state = self.FOLLOWING
@@ -112,9 +148,41 @@ class ControlCore:
         if self.state != self.IDLE:
             self.state = self.RAMPING_DOWN
 
+    def fault(self, reason: str) -> None:
+        """Ramp down because something the run depends on failed (a stale sensor)."""
+        if self.state != self.IDLE:
+            self.fault_reason = reason
+            self.state = self.RAMPING_DOWN
+
     def elapsed_s(self, now_s: float) -> float:
         """Time since the current plan started [s]."""
         return now_s - self._start_s
+
+    def _model_step(self, plan: TrajectoryPlan, at_s: float) -> float:
+        """One compensator step on the plan read ``preview_s`` ahead of ``at_s``."""
+        self.model_steps += 1
+        return self.compensator.step(plan.desired_at(at_s + self.compensator.preview_s))
+
+    def _target_at(self, plan: TrajectoryPlan, elapsed_s: float) -> float:
+        """The compensator's pressure for plan time ``elapsed_s`` (may raise)."""
+        period = self.compensator.sample_period_s
+        if period is None:
+            return self._model_step(plan, elapsed_s)
+        if not self._primed:
+            self._k = 0
+            self._y0 = self._model_step(plan, 0.0)
+            self._y1 = self._model_step(plan, period)
+            self._primed = True
+        # Step the model through every sample instant the loop has reached (several after
+        # a missed deadline: the model must see its own rate, not the loop's hiccups).
+        while (self._k + 1) * period <= elapsed_s + self._PHASE_TOLERANCE * period:
+            self._k += 1
+            self._y0 = self._y1
+            self._y1 = self._model_step(plan, (self._k + 1) * period)
+        phase = (elapsed_s - self._k * period) / period
+        if phase <= self._PHASE_TOLERANCE:
+            return self._y0
+        return self._y0 + min(phase, 1.0) * (self._y1 - self._y0)
 
     def tick(self, now_s: float, dt_s: float) -> TickOutput | None:
         """One control tick at time ``now_s`` (``dt_s`` since the last). None when idle."""
@@ -127,10 +195,8 @@ class ControlCore:
                 self.state = self.RAMPING_DOWN
             else:
                 self._last_angle = self.plan.desired_at(elapsed)
-                preview_s = self.compensator.preview_s
-                ahead = self.plan.desired_at(elapsed + preview_s) if preview_s else self._last_angle
                 try:
-                    target = self.compensator.step(ahead)
+                    target = self._target_at(self.plan, elapsed)
                 except Exception as exc:
                     # A model that raises (ONNX Runtime, a refused sample) is as broken as one
                     # that returns NaN: the valve must not hold the last command.
@@ -140,6 +206,8 @@ class ControlCore:
                     # A broken model must not move the catheter: ramp down and say why.
                     self.nonfinite_from_compensator += 1
                     self.state = self.RAMPING_DOWN
+                else:
+                    self._last_target_pa = target
         if self.state == self.RAMPING_DOWN:
             target = 0.0
         floor = 0.0 if self.state == self.RAMPING_DOWN else self.min_pressure_pa
@@ -151,3 +219,45 @@ class ControlCore:
             self.state = self.IDLE
             self.plan = None
         return TickOutput(command, self._last_angle, self.state)
+
+
+class SensorWatch:
+    """Ages of the sensor streams a run depends on; names the first one gone stale.
+
+    Receipt times come from the subscription callbacks, the check from the control thread:
+    single float stores, so no lock is needed.
+
+    Args:
+        required: stream names that must keep arriving (e.g. ``tip/angle``).
+        timeout_s: longest gap between samples before the stream counts as stale [s].
+    """
+
+    def __init__(self, required: tuple[str, ...], timeout_s: float) -> None:
+        if not timeout_s > 0.0:
+            raise ValueError(f"sensor timeout must be > 0 s, got {timeout_s}")
+        self.required = required
+        self.timeout_s = timeout_s
+        self._last_s: dict[str, float | None] = dict.fromkeys(required)
+
+    def seen(self, name: str, now_s: float) -> None:
+        """A sample of ``name`` arrived at monotonic ``now_s``."""
+        if name in self._last_s:
+            self._last_s[name] = now_s
+
+    def age_s(self, name: str, now_s: float) -> float:
+        """Seconds since the last sample of ``name`` (inf if none yet)."""
+        last = self._last_s[name]
+        return math.inf if last is None else now_s - last
+
+    def stale(self, now_s: float) -> str:
+        """Why a required stream is stale, or '' when all are fresh."""
+        for name in self.required:
+            age = self.age_s(name, now_s)
+            if age == math.inf:
+                return f"{name} required but none received"
+            if age > self.timeout_s:
+                return (
+                    f"{name} stale: no sample for {age * 1e3:.0f} ms "
+                    f"(limit {self.timeout_s * 1e3:.0f} ms)"
+                )
+        return ""

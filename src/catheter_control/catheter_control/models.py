@@ -8,7 +8,6 @@ Runtime, so the node never imports torch.
 
 from __future__ import annotations
 
-import math
 from importlib import resources
 from pathlib import Path
 
@@ -35,12 +34,16 @@ class ModelCompensator:
     Args:
         stream: The model's stateful stepper (desired angle [rad] in, pressure [Pa] out).
         preview_s: How far ahead the model reads the plan [s].
+        sample_period_s: The period the model was fitted at, which it must be stepped at [s].
         label: What the node reports it runs.
     """
 
-    def __init__(self, stream: Stream, preview_s: float, label: str) -> None:
+    def __init__(
+        self, stream: Stream, preview_s: float, sample_period_s: float, label: str
+    ) -> None:
         self._stream = stream
         self.preview_s = preview_s
+        self.sample_period_s: float | None = sample_period_s
         self.label = label
 
     def reset(self) -> None:
@@ -52,14 +55,14 @@ class ModelCompensator:
         return float(self._stream.step(angle_desired_rad))
 
 
-def load_compensator(
-    kind: str, model_dir: str, control_rate_hz: float | None = None
-) -> StreamingCompensator:
+def load_compensator(kind: str, model_dir: str) -> StreamingCompensator:
     """Build the named compensator from a model directory ('' = the shipped one).
 
+    A model is stepped at the rate it was fitted at whatever the control rate
+    (:class:`~catheter_control.control_core.ControlCore` interpolates between its samples).
+
     Raises:
-        ParameterError: Unknown kind, a model of another kind or direction, or a model
-            fitted at another rate than the control loop steps it.
+        ParameterError: Unknown kind, or a model of another kind or direction.
         ModelDirError: The directory is missing, malformed, or fails its hash check.
     """
     if kind not in COMPENSATORS:
@@ -73,9 +76,6 @@ def load_compensator(
     if model.direction != "inverse":
         raise ParameterError(f"{path} holds a {model.kind} forward model, not a compensator")
     rate_hz = model.fitted_rate_hz
-    if control_rate_hz is not None and not math.isclose(rate_hz, control_rate_hz, rel_tol=1e-6):
-        raise ParameterError(
-            f"{path}: the {kind} model was fitted at {rate_hz:g} Hz and must be stepped at that "
-            f"rate, but control_rate_hz is {control_rate_hz:g} Hz"
-        )
-    return ModelCompensator(model.stream(), model.preview_samples / rate_hz, f"{kind} ({path})")
+    return ModelCompensator(
+        model.stream(), model.preview_samples / rate_hz, 1.0 / rate_hz, f"{kind} ({path})"
+    )
