@@ -5,7 +5,7 @@ import time
 
 import pytest
 
-from catheter_driver.rt_loop import DeadlineLoop
+from catheter_driver.rt_loop import DeadlineLoop, LatencyWindow
 
 
 def test_ticks_at_rate_on_absolute_deadlines() -> None:
@@ -46,3 +46,14 @@ def test_an_exception_is_kept_for_the_owner() -> None:
     time.sleep(0.1)
     assert isinstance(loop.error, RuntimeError)
     assert not loop.running
+
+
+def test_latency_window_reports_percentiles_in_ms_and_nothing_before_data() -> None:
+    window = LatencyWindow(window=100)
+    assert window.summary_ms()["command_latency_p99_ms"] == ""
+    for k in range(1000):  # only the last 100 count: 0.9 ms .. 0.999 ms
+        window.add(k * 1e-6)
+    summary = window.summary_ms()
+    assert summary["command_latency_max_ms"] == "0.999"
+    assert summary["command_latency_p50_ms"] == "0.950"
+    assert float(summary["command_latency_p99_ms"]) == pytest.approx(0.998, abs=1e-3)

@@ -135,3 +135,37 @@ class MonotonicStamper:
     def ns(self, mono_s: float) -> int:
         """ROS time [ns] of the monotonic instant ``mono_s`` [s]."""
         return self._offset_ns + round(mono_s * 1e9)
+
+
+class LatencyWindow:
+    """Recent latencies (receipt minus a message's stamp), for a node's diagnostics.
+
+    Commands are stamped with their intended application time (the compensator's tick
+    deadline), so receipt minus stamp at a driver is the command's age on arrival: tick to
+    publish to DDS to this callback. Appending is cheap enough for a 1 kHz subscription.
+
+    Args:
+        window: number of recent samples kept for percentiles.
+    """
+
+    def __init__(self, window: int = 5000) -> None:
+        self._samples: deque[float] = deque(maxlen=window)
+
+    def add(self, latency_s: float) -> None:
+        """One message's latency [s]."""
+        self._samples.append(latency_s)
+
+    def summary_ms(self) -> dict[str, str]:
+        """p50, p99 and max over the window [ms], formatted for /diagnostics ('' if empty)."""
+        if not self._samples:
+            return {
+                "command_latency_p50_ms": "",
+                "command_latency_p99_ms": "",
+                "command_latency_max_ms": "",
+            }
+        ms = np.fromiter(self._samples, float) * 1e3
+        return {
+            "command_latency_p50_ms": f"{np.percentile(ms, 50):.3f}",
+            "command_latency_p99_ms": f"{np.percentile(ms, 99):.3f}",
+            "command_latency_max_ms": f"{ms.max():.3f}",
+        }

@@ -17,6 +17,7 @@ from catheter_driver import diagnostics, messages, qos
 from catheter_driver.loop_node import LoopNode
 from catheter_driver.node_main import run_node
 from catheter_driver.params import declare_float, declare_int, declare_plain
+from catheter_driver.rt_loop import LatencyWindow
 from catheter_driver.sim_hardware import SimHardware
 from catheter_models.contract import PRESSURE_COMMAND, PRESSURE_MEASURED, TIP_ANGLE, TIP_DISTANCE
 from catheter_models.plant.config import EFFECTS, RIG_PARAMS, ParamSpec, PlantConfig
@@ -73,6 +74,7 @@ class SimHardwareNode(LoopNode):
             FluidPressure, PRESSURE_COMMAND.name, self._on_command, qos.KEEP_EVERY_SAMPLE
         )
         self.hw.plant.warm_up()
+        self._latency = LatencyWindow()
         self._samples_done = 0
         self.create_loop(rig["sample_rate_hz"], self._tick)
         self.create_timer(1.0, self._publish_diagnostics)
@@ -82,8 +84,10 @@ class SimHardwareNode(LoopNode):
         )
 
     def _on_command(self, msg: FluidPressure) -> None:
+        now_s = time.monotonic()
+        self._latency.add((self.stamp_ns(now_s) - messages.ns_from_time(msg.header.stamp)) * 1e-9)
         gauge_pa = messages.gauge_pa_from(msg, self.ambient_pa)
-        if not self.hw.command(gauge_pa, time.monotonic()):
+        if not self.hw.command(gauge_pa, now_s):
             self.get_logger().warning(self.hw.last_refusal, throttle_duration_sec=1.0)
 
     def _tick(self, k: int, deadline_s: float) -> None:
@@ -126,6 +130,7 @@ class SimHardwareNode(LoopNode):
             "samples": stats.ticks,
             "missed_deadlines": stats.missed,
             "lateness_p99_ms": f"{stats.lateness_p99_s * 1e3:.3f}",
+            **self._latency.summary_ms(),
         }
         values.update(self.config.describe())
         diagnostics.publish_status(

@@ -26,7 +26,7 @@ from catheter_driver.devices.factory import make_transmitter, make_valve
 from catheter_driver.lifecycle_util import device_options
 from catheter_driver.node_main import run_node
 from catheter_driver.params import declare_float, declare_plain
-from catheter_driver.rt_loop import DeadlineLoop, MonotonicStamper
+from catheter_driver.rt_loop import DeadlineLoop, LatencyWindow, MonotonicStamper
 from catheter_driver.valve_core import ValveDriverCore
 from catheter_models.contract import PRESSURE_COMMAND, PRESSURE_MEASURED
 from catheter_models.errors import CatheterError
@@ -63,6 +63,7 @@ class ValveDriverNode(LifecycleNode):
         self.core: ValveDriverCore | None = None
         self._loops: list[DeadlineLoop] = []
         self._stamper = MonotonicStamper(self.get_clock().now().nanoseconds)
+        self._latency = LatencyWindow()
         self._last_tick_state = "unconfigured"
         self._last_reason = "not configured"
         self._pub_measured = self.create_publisher(
@@ -179,7 +180,11 @@ class ValveDriverNode(LifecycleNode):
         core = self.core
         if core is None:
             return
-        if not core.command(messages.gauge_pa_from(msg, self.ambient_pa), time.monotonic()):
+        now_s = time.monotonic()
+        self._latency.add(
+            (self._stamper.ns(now_s) - messages.ns_from_time(msg.header.stamp)) * 1e-9
+        )
+        if not core.command(messages.gauge_pa_from(msg, self.ambient_pa), now_s):
             self.get_logger().warning(core.last_refusal, throttle_duration_sec=1.0)
 
     def _control_tick(self, _k: int, deadline_s: float) -> None:
@@ -227,7 +232,11 @@ class ValveDriverNode(LifecycleNode):
     # -- diagnostics ---------------------------------------------------------------------
     def _publish_diagnostics(self) -> None:
         core = self.core
-        values: dict[str, object] = {"state": self._last_tick_state, "reason": self._last_reason}
+        values: dict[str, object] = {
+            "state": self._last_tick_state,
+            "reason": self._last_reason,
+            **self._latency.summary_ms(),
+        }
         level = diagnostics.OK if self._last_tick_state == "ok" else diagnostics.WARN
         if self._last_tick_state in {"link_down", "error"}:
             level = diagnostics.ERROR
