@@ -10,6 +10,7 @@ from catheter_control.trajectory import (
     TrajectoryPlan,
     load_trajectory_file,
     preset_knots,
+    with_lead_in,
 )
 from catheter_models.errors import SignalError
 from catheter_models.signals import TEST_TRAJECTORIES
@@ -80,3 +81,25 @@ def test_bad_files_name_the_problem(tmp_path) -> None:
         load_trajectory_file(nocol)
     with pytest.raises(SignalError, match="does not exist"):
         load_trajectory_file(tmp_path / "missing.csv")
+
+
+def test_a_trajectory_that_starts_bent_gets_a_lead_in_from_rest() -> None:
+    t, a = preset_knots("traj_down_chirp")  # begins at 8 deg
+    t2, a2, lead_s = with_lead_in(t, a, approach_s=1.0, settle_s=1.0)
+    assert lead_s == pytest.approx(2.0)
+    assert a2[0] == 0.0 and t2[0] == 0.0
+    np.testing.assert_array_equal(a2[t2 >= lead_s], a)
+    np.testing.assert_allclose(t2[t2 >= lead_s], t + lead_s)
+    hold = (t2 >= 1.0) & (t2 < lead_s)
+    np.testing.assert_allclose(a2[hold], a[0])
+    assert np.all(np.diff(a2[t2 <= 1.0]) >= 0.0)  # a monotone move up to the start angle
+    # The plan with its lead-in passes the node's limits, and the step is gone.
+    plan = TrajectoryPlan.from_knots(t2, a2, TrajectoryLimits(), 250.0)
+    assert plan.desired_at(0.0) == 0.0
+    assert abs(plan.desired_at(0.004)) < np.radians(0.05)
+
+
+def test_a_trajectory_that_starts_at_rest_is_left_alone() -> None:
+    t, a = preset_knots("traj_up_chirp")
+    t2, a2, lead_s = with_lead_in(t, a)
+    assert lead_s == 0.0 and t2 is t and a2 is a

@@ -171,6 +171,38 @@ def load_trajectory_file(path: Path) -> tuple[FloatArray, FloatArray]:
     return np.asarray(rows["t_s"], dtype=float), angle
 
 
+def with_lead_in(
+    t_s: FloatArray,
+    angle_rad: FloatArray,
+    approach_s: float = 1.0,
+    settle_s: float = 1.0,
+    rate_hz: float = 50.0,
+) -> tuple[FloatArray, FloatArray, float]:
+    """Knots that first bring the catheter from rest to the trajectory's start, then hold.
+
+    A trajectory that does not begin straight (thesis trajectory 2 begins at 8 deg) would
+    otherwise open with a step no compensator can follow. The move is the benchmarks' own
+    raised cosine (:func:`catheter_models.models.evaluate.lead_in`), so a run on the rig is
+    scored like the benchmark. Trajectories that begin at rest are returned unchanged.
+
+    Returns:
+        Knot times [s] and angles [rad], and when the trajectory itself starts [s].
+    """
+    from catheter_models.models.evaluate import lead_in
+
+    t = np.asarray(t_s, dtype=float)
+    a = np.asarray(angle_rad, dtype=float)
+    if a.size == 0 or abs(a[0]) < 1e-6 or t[0] > 0.0:
+        return t, a, 0.0  # starts at rest, or already says how to get to its start
+    lead = np.concatenate([[0.0], lead_in(float(a[0]), rate_hz, approach_s, settle_s)])[:-1]
+    lead_s = lead.size / rate_hz
+    return (
+        np.concatenate([np.arange(lead.size) / rate_hz, t + lead_s]),
+        np.concatenate([lead, a]),
+        lead_s,
+    )
+
+
 def preset_knots(name: str, rate_hz: float = 50.0) -> tuple[FloatArray, FloatArray]:
     """Knots of a thesis trajectory preset (sec. 9.3), sampled at ``rate_hz``."""
     spec = get_preset(name)
