@@ -3,7 +3,13 @@
 import numpy as np
 import pytest
 
-from catheter_control.tracking_report import TrackingError, save_plot, score_run
+from catheter_control.tracking_report import (
+    TrackingError,
+    save_plot,
+    score_run,
+    timing_summary,
+    timing_text,
+)
 
 
 def test_scores_aligned_on_stamps_within_window(tmp_path) -> None:
@@ -25,3 +31,51 @@ def test_no_measurements_is_a_clear_error() -> None:
         score_run(td, td, [], [])
     with pytest.raises(TrackingError, match="overlap"):
         score_run(td, td, [5.0, 6.0], [0.0, 0.0])
+
+
+def test_timing_summary_differences_counters_and_keeps_the_worst_window() -> None:
+    comp = [
+        {
+            "ticks": "1000",
+            "missed_deadlines": "2",
+            "lateness_p99_ms": "0.20",
+            "compute_p99_ms": "0.10",
+            "control_rate_hz": "1000",
+        },
+        {
+            "ticks": "2000",
+            "missed_deadlines": "2",
+            "lateness_p99_ms": "0.90",
+            "compute_p99_ms": "0.12",
+            "control_rate_hz": "1000",
+        },
+        {
+            "ticks": "2999",
+            "missed_deadlines": "3",
+            "lateness_p99_ms": "0.30",
+            "compute_p99_ms": "0.11",
+            "control_rate_hz": "1000",
+        },
+    ]
+    # The first driver report came before any command: its latency fields are empty.
+    driver = [
+        {"command_latency_p50_ms": "", "command_latency_p99_ms": "", "command_latency_max_ms": ""},
+        {
+            "command_latency_p50_ms": "0.3",
+            "command_latency_p99_ms": "0.8",
+            "command_latency_max_ms": "2.5",
+        },
+    ]
+    timing = timing_summary(comp, driver)
+    assert timing["ticks"] == 1999 and timing["missed_deadlines"] == 1
+    assert timing["missed_fraction"] == pytest.approx(1 / 2000)
+    assert timing["lateness_p99_ms"] == 0.90 and timing["compute_p99_ms"] == 0.12
+    assert timing["command_latency_p99_ms"] == 0.8 and timing["command_latency_max_ms"] == 2.5
+    text = timing_text(timing)
+    assert "missed deadlines 1 (0.050 %)" in text and "p99 0.800 ms" in text
+
+
+def test_timing_summary_without_reports_says_nothing_it_does_not_know() -> None:
+    timing = timing_summary([], [])
+    assert timing["ticks"] == 0 and timing["missed_fraction"] is None
+    assert "n/a" in timing_text(timing)

@@ -6,7 +6,9 @@
 
 It validates the trajectory before anything moves, publishes it on ``trajectory``, shows
 progress, then prints RMSE, MAE (maximum absolute error) and NRMSE of ``tip/angle`` against
-``angle/desired``, saves a plot, and says where the bag is.
+``angle/desired``, saves a plot, and says where the bag is. A trajectory that does not start
+straight is preceded by a 1 s move from rest and a 1 s hold (``--lead-in-s``), which are not
+scored, as in the benchmarks.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from catheter_control.trajectory import (
     TrajectoryPlan,
     load_trajectory_file,
     preset_knots,
+    with_lead_in,
 )
 from catheter_driver.laser_core import Calibration
 from catheter_models.contract import DEFAULT_NAMESPACE
@@ -47,6 +50,9 @@ class _Collected:
     measured: list[tuple[float, float]] = field(default_factory=list)
     refusal: str = ""
     recorder: dict[str, str] = field(default_factory=dict)
+    # (monotonic receipt [s], status values) of the compensator and the commanded driver.
+    compensator: list[tuple[float, dict[str, str]]] = field(default_factory=list)
+    driver: list[tuple[float, dict[str, str]]] = field(default_factory=list)
 
 
 def _parse(argv: list[str] | None) -> argparse.Namespace:
@@ -83,6 +89,13 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument(
         "--timeout-s", type=float, default=60.0, help="wait for the graph this long"
     )
+    parser.add_argument(
+        "--lead-in-s",
+        type=float,
+        default=1.0,
+        help="for a trajectory that does not start straight: move there from rest over this "
+        "long, then hold as long again; not scored (0: start with the step)",
+    )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     return parser.parse_args(argv)
 
@@ -100,6 +113,9 @@ def main(argv: list[str] | None = None) -> int:
             name = args.preset
             t_s, angle_rad = preset_knots(name)
             signal_params = dict(get_preset(name).params())
+        lead_s = 0.0
+        if args.lead_in_s > 0.0:
+            t_s, angle_rad, lead_s = with_lead_in(t_s, angle_rad, args.lead_in_s, args.lead_in_s)
         # Refuse a bad trajectory here, before any node starts or anything moves.
         plan = TrajectoryPlan.from_knots(t_s, angle_rad, limits, args.control_rate_hz, name)
     except CatheterError as exc:
@@ -142,6 +158,8 @@ def main(argv: list[str] | None = None) -> int:
                 "control_rate_hz": args.control_rate_hz,
                 "compensator": args.compensator,
                 "model_dir": args.model_dir,
+                # The local rig has a laser: stop if it goes quiet (a patient's would not).
+                "require_tip_angle": True,
             },
         )
         if args.emulated_rig:
@@ -162,7 +180,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"follow_trajectory: starting the {what} (logs in {run_dir / 'logs'})")
         graph.start()
     try:
-        return _run(args, plan, run_dir, bag_path, graph)
+        return _run(args, plan, run_dir, bag_path, graph, lead_s=lead_s)
     finally:
         if graph is not None:
             graph.stop()
@@ -178,6 +196,8 @@ def _run(
     run_dir: Path,
     bag_path: Path | None,
     graph: object,
+    *,
+    lead_s: float,
 ) -> int:
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
@@ -188,7 +208,14 @@ def _run(
 
     from catheter_control import qos
     from catheter_control.bringup import ProcessGraph
-    from catheter_control.tracking_report import TrackingError, save_json, save_plot, score_run
+    from catheter_control.tracking_report import (
+        TrackingError,
+        save_json,
+        save_plot,
+        score_run,
+        timing_summary,
+        timing_text,
+    )
     from catheter_driver.messages import angle_rad_from, ns_from_time
     from catheter_models.contract import (
         ANGLE_DESIRED,
@@ -211,13 +238,17 @@ def _run(
             data.measured.append((ns_from_time(msg.header.stamp) * 1e-9, angle_rad_from(msg)))
 
         def on_diag(msg: DiagnosticArray) -> None:
+            now = time.monotonic()
             for status in msg.status:
-                if status.name.endswith("compensator") and status.message.startswith(
-                    "trajectory refused"
-                ):
-                    data.refusal = status.message
-                if status.name.endswith("recorder"):
-                    data.recorder = {kv.key: kv.value for kv in status.values}
+                values = {kv.key: kv.value for kv in status.values}
+                if status.name.endswith("compensator"):
+                    data.compensator.append((now, values))
+                    if status.message.startswith("trajectory refused"):
+                        data.refusal = status.message
+                elif status.name.endswith(("sim_hardware", "valve_driver")):
+                    data.driver.append((now, values))
+                elif status.name.endswith("recorder"):
+                    data.recorder = values
 
         node.create_subscription(JointState, ANGLE_DESIRED.name, on_desired, qos.KEEP_EVERY_SAMPLE)
         node.create_subscription(JointState, TIP_ANGLE.name, on_measured, qos.KEEP_EVERY_SAMPLE)
@@ -283,6 +314,11 @@ def _run(
         pub.publish(msg)
         sent_at = time.monotonic()
         print(f"follow_trajectory: following {plan.name!r} ({plan.duration_s:.1f} s)")
+        if lead_s:
+            print(
+                f"follow_trajectory: the first {lead_s:g} s move from rest to "
+                f"{math.degrees(plan.desired_at(lead_s)):.1f} deg and hold (not scored)"
+            )
         bar = tqdm(
             total=round(plan.duration_s, 1),
             unit="s",
@@ -319,6 +355,16 @@ def _run(
                 )
                 return EXIT_GRAPH
         bar.close()
+        # One more report from each node after the run, so its counters span all of it.
+        end_s = time.monotonic()
+        until = end_s + 2.5
+        while time.monotonic() < until and not (
+            data.compensator
+            and data.compensator[-1][0] > end_s
+            and data.driver
+            and data.driver[-1][0] > end_s
+        ):
+            rclpy.spin_once(node, timeout_sec=0.05)
         node.destroy_node()
 
     start = data.desired[0][0]
@@ -328,16 +374,31 @@ def _run(
             [d[1] for d in data.desired],
             [m[0] for m in data.measured],
             [m[1] for m in data.measured],
-            window_s=(start, start + plan.duration_s),
+            window_s=(start + lead_s, start + plan.duration_s),
         )
     except TrackingError as exc:
         print(f"follow_trajectory: cannot score the run: {exc}", file=sys.stderr)
         return EXIT_GRAPH
     print(result.text(plan.name))
+    # Reports from the last one before the first set-point to the first after the end.
+    assert started_at is not None
+    first = max([t for t, _ in data.compensator if t <= started_at], default=started_at)
+    timing = timing_summary(
+        [v for t, v in data.compensator if t >= first],
+        [v for t, v in data.driver if t >= first],
+    )
+    print(timing_text(timing))
     run_dir.mkdir(parents=True, exist_ok=True)
     plot = save_plot(result, run_dir / "tracking.png", f"{plan.name}: desired vs measured")
     save_json(
-        result, run_dir / "report.json", {"trajectory": plan.name, "bag": str(bag_path or "")}
+        result,
+        run_dir / "report.json",
+        {
+            "trajectory": plan.name,
+            "bag": str(bag_path or ""),
+            "lead_in_s": lead_s,
+            "timing": timing,
+        },
     )
     print(f"Plot: {plot}")
     print(f"Report: {run_dir / 'report.json'}")

@@ -172,3 +172,71 @@ def save_json(result: TrackingResult, path: Path, extra: dict[str, object]) -> P
     """Metrics (degrees) and run facts as JSON."""
     path.write_text(json.dumps({**extra, **result.to_json()}, indent=2) + "\n")
     return path
+
+
+def _floats(reports: list[dict[str, str]], key: str) -> list[float]:
+    out = []
+    for values in reports:
+        try:
+            out.append(float(values[key]))
+        except (KeyError, ValueError):
+            continue  # not reported yet (e.g. no command received before this report)
+    return out
+
+
+def timing_summary(
+    compensator: list[dict[str, str]], driver: list[dict[str, str]]
+) -> dict[str, float | int | None]:
+    """The control loop's timing over a run, from the nodes' 1 Hz /diagnostics values.
+
+    Args:
+        compensator: the compensator's status values, in order, from the first report after
+            the run started to the first after it ended.
+        driver: the same for the node that received the commands (sim_hardware or
+            valve_driver).
+
+    Ticks and missed deadlines are the nodes' own counters, differenced over the run (to
+    within one report period). Percentiles are reported by the nodes over their recent
+    window (5000 ticks): the worst window of the run is kept, which bounds the run's own.
+    """
+    ticks = _floats(compensator, "ticks")
+    missed = _floats(compensator, "missed_deadlines")
+
+    def worst(reports: list[dict[str, str]], key: str) -> float | None:
+        found = _floats(reports, key)
+        return max(found) if found else None
+
+    n_ticks = int(ticks[-1] - ticks[0]) if len(ticks) >= 2 else 0
+    n_missed = int(missed[-1] - missed[0]) if len(missed) >= 2 else 0
+    rate = _floats(compensator, "control_rate_hz")
+    return {
+        "control_rate_hz": rate[-1] if rate else None,
+        "ticks": n_ticks,
+        "missed_deadlines": n_missed,
+        "missed_fraction": n_missed / (n_ticks + n_missed) if n_ticks else None,
+        "lateness_p99_ms": worst(compensator, "lateness_p99_ms"),
+        "compute_p99_ms": worst(compensator, "compute_p99_ms"),
+        "command_latency_p50_ms": worst(driver, "command_latency_p50_ms"),
+        "command_latency_p99_ms": worst(driver, "command_latency_p99_ms"),
+        "command_latency_max_ms": worst(driver, "command_latency_max_ms"),
+    }
+
+
+def timing_text(timing: dict[str, float | int | None]) -> str:
+    """One paragraph a person reads: did the loop hold its deadlines?"""
+
+    def ms(key: str) -> str:
+        value = timing.get(key)
+        return "n/a" if value is None else f"{value:.3f} ms"
+
+    fraction = timing.get("missed_fraction")
+    missed = "n/a" if fraction is None else f"{100 * fraction:.3f} %"
+    return "\n".join(
+        [
+            f"Control loop at {timing.get('control_rate_hz') or 0:g} Hz:",
+            f"  ticks {timing['ticks']}, missed deadlines {timing['missed_deadlines']} ({missed})",
+            f"  lateness p99 {ms('lateness_p99_ms')}, compute p99 {ms('compute_p99_ms')}",
+            f"  command latency, tick to driver: p50 {ms('command_latency_p50_ms')}, "
+            f"p99 {ms('command_latency_p99_ms')}, max {ms('command_latency_max_ms')}",
+        ]
+    )
