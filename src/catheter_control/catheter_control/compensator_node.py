@@ -112,6 +112,8 @@ class CompensatorNode(LoopNode):
         self._lock = threading.Lock()
         self._refusals = 0
         self._last_refusal = ""
+        # The WARN stands until a trajectory starts: a refusal is news until the next run.
+        self._refusal_standing = False
         self._accepted = 0
 
         self._pub_cmd = self.create_publisher(FluidPressure, PRESSURE_COMMAND.name, qos.SENSOR)
@@ -141,6 +143,7 @@ class CompensatorNode(LoopNode):
         with self._lock:
             self._refusals += 1
             self._last_refusal = reason
+            self._refusal_standing = True
         self.get_logger().error(f"trajectory refused: {reason}")
         self._publish_diagnostics()
 
@@ -188,6 +191,7 @@ class CompensatorNode(LoopNode):
                 if listening and not stale:
                     self.core.start(plan, deadline_s)
                     self._pending = None
+                    self._refusal_standing = False
                 elif deadline_s > give_up_s:
                     self._pending = None
                     refusal = stale or (
@@ -215,6 +219,7 @@ class CompensatorNode(LoopNode):
         stats = self.loop.stats()
         with self._lock:
             refusals, last, accepted = self._refusals, self._last_refusal, self._accepted
+            standing = self._refusal_standing
             state, bad_model = self.core.state, self.core.nonfinite_from_compensator
             model_error, fault = self.core.compensator_error, self.core.fault_reason
             model_steps = self.core.model_steps
@@ -229,7 +234,7 @@ class CompensatorNode(LoopNode):
                 diagnostics.ERROR,
                 f"compensator failed ({model_error or 'non-finite pressure'}); ramped down",
             )
-        elif refusals:
+        elif standing:
             level, message = diagnostics.WARN, f"trajectory refused: {last}"
         diagnostics.publish_status(
             self._pub_diag,
