@@ -5,7 +5,7 @@ import time
 
 import pytest
 
-from catheter_driver.rt_loop import DeadlineLoop, LatencyWindow
+from catheter_driver.rt_loop import DeadlineLoop, LatencyWindow, set_realtime
 
 
 def test_ticks_at_rate_on_absolute_deadlines() -> None:
@@ -57,3 +57,17 @@ def test_latency_window_reports_percentiles_in_ms_and_nothing_before_data() -> N
     assert summary["command_latency_max_ms"] == "0.999"
     assert summary["command_latency_p50_ms"] == "0.950"
     assert float(summary["command_latency_p99_ms"]) == pytest.approx(0.998, abs=1e-3)
+
+
+def test_a_real_time_loop_runs_whether_or_not_the_os_allows_it() -> None:
+    assert set_realtime(0) == "off (rt_priority 0)"
+    ticks: list[int] = []
+    loop = DeadlineLoop(200.0, lambda k, d: ticks.append(k), name="rt", rt_priority=10)
+    loop.start()
+    time.sleep(0.3)
+    loop.stop()
+    assert len(ticks) > 30
+    # Root or CAP_SYS_NICE: SCHED_FIFO; otherwise the reason, never an exception.
+    assert loop.realtime == "SCHED_FIFO 10" or loop.realtime.startswith("unavailable: "), (
+        loop.realtime
+    )

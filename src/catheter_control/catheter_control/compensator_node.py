@@ -28,6 +28,7 @@ from catheter_driver import diagnostics, messages
 from catheter_driver.loop_node import LoopNode
 from catheter_driver.node_main import run_node
 from catheter_driver.params import declare_float, declare_plain
+from catheter_driver.polled import PolledTopics
 from catheter_models.contract import (
     ANGLE_DESIRED,
     BEND_JOINT,
@@ -122,14 +123,16 @@ class CompensatorNode(LoopNode):
         self.create_subscription(
             JointTrajectory, TRAJECTORY.name, self._on_trajectory, qos.TRAJECTORY
         )
-        for spec, msg_type in ((PRESSURE_MEASURED, FluidPressure), (TIP_ANGLE, JointState)):
-            if spec.name in required:
-                self.create_subscription(
-                    msg_type,
-                    spec.name,
-                    lambda _msg, name=spec.name: self.watch.seen(name, time.monotonic()),
-                    qos_profile_sensor_data,
-                )
+        # Polled by the loop, not dispatched by the executor: see catheter_driver.polled.
+        self._sensors = PolledTopics(
+            self,
+            {
+                spec.name: msg_type
+                for spec, msg_type in ((PRESSURE_MEASURED, FluidPressure), (TIP_ANGLE, JointState))
+                if spec.name in required
+            },
+            qos_profile_sensor_data,
+        )
         self.create_service(Trigger, "~/stop", self._on_stop)
         self.create_timer(1.0, self._publish_diagnostics)
         self.create_loop(self.rate_hz, self._tick)
@@ -183,6 +186,8 @@ class CompensatorNode(LoopNode):
 
     def _tick(self, _k: int, deadline_s: float) -> None:
         refusal = fault = ""
+        for name in self._sensors.poll():
+            self.watch.seen(name, deadline_s)
         with self._lock:
             stale = self.watch.stale(deadline_s)
             if self._pending is not None:
@@ -251,6 +256,7 @@ class CompensatorNode(LoopNode):
                 "trajectories_accepted": accepted,
                 "trajectories_refused": refusals,
                 "last_refusal": last,
+                "realtime": self.realtime,
                 "ticks": stats.ticks,
                 "missed_deadlines": stats.missed,
                 "lateness_p50_ms": f"{stats.lateness_p50_s * 1e3:.3f}",
@@ -263,6 +269,13 @@ class CompensatorNode(LoopNode):
                 },
             },
         )
+
+    def destroy_node(self) -> None:
+        """Stop the loop (which polls the sensors) before their helper node goes."""
+        super().destroy_node()
+        sensors = getattr(self, "_sensors", None)
+        if sensors is not None:
+            sensors.destroy()
 
 
 def main(args: list[str] | None = None) -> None:

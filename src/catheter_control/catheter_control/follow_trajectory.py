@@ -398,6 +398,24 @@ def _run(
             "bag": str(bag_path or ""),
             "lead_in_s": lead_s,
             "timing": timing,
+            # The compensator's 1 Hz reports over the run: where in it deadlines were missed.
+            "timing_series": [
+                {
+                    "t_s": round(t - started_at, 3),
+                    **{
+                        k: v.get(k, "")
+                        for k in (
+                            "state",
+                            "ticks",
+                            "missed_deadlines",
+                            "lateness_p99_ms",
+                            "compute_p99_ms",
+                        )
+                    },
+                }
+                for t, v in data.compensator
+                if t >= first
+            ],
         },
     )
     print(f"Plot: {plot}")

@@ -186,7 +186,7 @@ def _floats(reports: list[dict[str, str]], key: str) -> list[float]:
 
 def timing_summary(
     compensator: list[dict[str, str]], driver: list[dict[str, str]]
-) -> dict[str, float | int | None]:
+) -> dict[str, float | int | str | None]:
     """The control loop's timing over a run, from the nodes' 1 Hz /diagnostics values.
 
     Args:
@@ -211,6 +211,7 @@ def timing_summary(
     rate = _floats(compensator, "control_rate_hz")
     return {
         "control_rate_hz": rate[-1] if rate else None,
+        "realtime": compensator[-1].get("realtime") if compensator else None,
         "ticks": n_ticks,
         "missed_deadlines": n_missed,
         "missed_fraction": n_missed / (n_ticks + n_missed) if n_ticks else None,
@@ -222,18 +223,19 @@ def timing_summary(
     }
 
 
-def timing_text(timing: dict[str, float | int | None]) -> str:
+def timing_text(timing: dict[str, float | int | str | None]) -> str:
     """One paragraph a person reads: did the loop hold its deadlines?"""
 
     def ms(key: str) -> str:
         value = timing.get(key)
-        return "n/a" if value is None else f"{value:.3f} ms"
+        return f"{value:.3f} ms" if isinstance(value, float | int) else "n/a"
 
     fraction = timing.get("missed_fraction")
-    missed = "n/a" if fraction is None else f"{100 * fraction:.3f} %"
+    missed = f"{100 * fraction:.3f} %" if isinstance(fraction, float | int) else "n/a"
     return "\n".join(
         [
-            f"Control loop at {timing.get('control_rate_hz') or 0:g} Hz:",
+            f"Control loop at {timing.get('control_rate_hz') or 0:g} Hz "
+            f"({timing.get('realtime') or 'scheduling unknown'}):",
             f"  ticks {timing['ticks']}, missed deadlines {timing['missed_deadlines']} ({missed})",
             f"  lateness p99 {ms('lateness_p99_ms')}, compute p99 {ms('compute_p99_ms')}",
             f"  command latency, tick to driver: p50 {ms('command_latency_p50_ms')}, "

@@ -23,6 +23,7 @@ from catheter_driver import diagnostics, messages
 from catheter_driver.devices.factory import make_laser_adc
 from catheter_driver.laser_core import Calibration, LaserAngleCore, ZeroingError
 from catheter_driver.lifecycle_util import device_options
+from catheter_driver.loop_node import declare_rt_priority, make_process_realtime
 from catheter_driver.node_main import run_node
 from catheter_driver.params import declare_float, declare_plain
 from catheter_driver.rt_loop import DeadlineLoop, MonotonicStamper
@@ -72,6 +73,7 @@ class LaserAngleNode(LifecycleNode):
         self.zero_max_pa = declare_float(self, "zero_max_pressure_pa", _ZERO_PA)
         self.ambient_pa = declare_float(self, "ambient_pressure_pa", _AMB)
         self.autostart = bool(declare_plain(self, "autostart", True, "configure+activate at start"))
+        self.rt_priority = declare_rt_priority(self)
         self.core: LaserAngleCore | None = None
         self._loop: DeadlineLoop | None = None
         self._stamper = MonotonicStamper(self.get_clock().now().nanoseconds)
@@ -129,7 +131,10 @@ class LaserAngleNode(LifecycleNode):
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Start reading and publishing."""
-        self._loop = DeadlineLoop(self.rate_hz, self._tick, name="laser_poll")
+        make_process_realtime(self, self.rt_priority)
+        self._loop = DeadlineLoop(
+            self.rate_hz, self._tick, name="laser_poll", rt_priority=self.rt_priority
+        )
         self._loop.start()
         self._state = "active"
         return super().on_activate(state)
@@ -238,7 +243,11 @@ class LaserAngleNode(LifecycleNode):
     # -- diagnostics ---------------------------------------------------------------------
     def _publish_diagnostics(self) -> None:
         core = self.core
-        values: dict[str, object] = {"state": self._state, "samples_published": self._published}
+        values: dict[str, object] = {
+            "state": self._state,
+            "samples_published": self._published,
+            "realtime": self._loop.realtime if self._loop is not None else "not active",
+        }
         level = diagnostics.OK
         if self._state in {"error", "link_down"}:
             level = diagnostics.ERROR

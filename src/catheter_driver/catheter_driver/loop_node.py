@@ -6,25 +6,64 @@ from collections.abc import Callable
 
 from rclpy.node import Node
 
-from catheter_driver.rt_loop import DeadlineLoop, MonotonicStamper
+from catheter_driver.params import declare_int
+from catheter_driver.rt_loop import (
+    DEFAULT_RT_PRIORITY,
+    DeadlineLoop,
+    MonotonicStamper,
+    set_process_realtime,
+)
+
+
+def declare_rt_priority(node: Node) -> int:
+    """The ``rt_priority`` parameter of a node with deadline loops (0..98, default 50)."""
+    return declare_int(
+        node,
+        "rt_priority",
+        DEFAULT_RT_PRIORITY,
+        low=0,
+        high=98,
+        doc="SCHED_FIFO priority of the loop threads; the node's other threads run 30 below "
+        "(0: normal scheduling)",
+    )
+
+
+def make_process_realtime(node: Node, rt_priority: int) -> None:
+    """Raise the node's threads below its loops; warn once, naming why, if the OS refuses."""
+    if not rt_priority:
+        return
+    refused = set_process_realtime(rt_priority)
+    if refused:
+        node.get_logger().warning(
+            f"real-time scheduling {refused}; the loops run at normal priority and may miss "
+            "deadlines under load (docs/compensator.md)"
+        )
 
 
 class LoopNode(Node):
     """Base for nodes whose work runs on a :class:`DeadlineLoop` (not an rclpy timer).
 
     Deadlines are on the monotonic clock; messages are stamped in ROS time through one
-    :class:`MonotonicStamper` taken at construction.
+    :class:`MonotonicStamper` taken at construction. Parameter ``rt_priority`` (default 50, 0
+    for off) runs the loop under SCHED_FIFO and the node's other threads 30 below it; where
+    the OS refuses, the node runs at normal priority, warns once and reports why.
     """
 
     def __init__(self, name: str) -> None:
         super().__init__(name)
         self._loop: DeadlineLoop | None = None
         self._stamper = MonotonicStamper(self.get_clock().now().nanoseconds)
+        self.rt_priority = declare_rt_priority(self)
 
     def create_loop(self, rate_hz: float, tick: Callable[[int, float], None]) -> DeadlineLoop:
         """Create the node's loop (started by :meth:`start`)."""
-        self._loop = DeadlineLoop(rate_hz, tick, name=self.get_name())
+        self._loop = DeadlineLoop(rate_hz, tick, name=self.get_name(), rt_priority=self.rt_priority)
         return self._loop
+
+    @property
+    def realtime(self) -> str:
+        """What the loop runs under (``SCHED_FIFO 50``), or why it is not real time."""
+        return self.loop.realtime
 
     @property
     def loop(self) -> DeadlineLoop:
@@ -38,7 +77,8 @@ class LoopNode(Node):
         return self._stamper.ns(mono_s)
 
     def start(self) -> None:
-        """Start the loop."""
+        """Start the loop (and make the node's other threads real time below it)."""
+        make_process_realtime(self, self.rt_priority)
         self.loop.start()
 
     def destroy_node(self) -> None:

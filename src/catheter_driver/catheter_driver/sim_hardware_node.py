@@ -127,6 +127,7 @@ class SimHardwareNode(LoopNode):
             "watchdog_vents": counters.watchdog_vents,
             "venting": self.hw.venting,
             "command_bar": f"{self.hw.command_pa / 1e5:.4f}",
+            "realtime": self.realtime,
             "samples": stats.ticks,
             "missed_deadlines": stats.missed,
             "lateness_p99_ms": f"{stats.lateness_p99_s * 1e3:.3f}",

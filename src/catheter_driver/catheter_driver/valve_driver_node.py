@@ -24,6 +24,7 @@ from std_srvs.srv import SetBool, Trigger
 from catheter_driver import diagnostics, messages, qos
 from catheter_driver.devices.factory import make_transmitter, make_valve
 from catheter_driver.lifecycle_util import device_options
+from catheter_driver.loop_node import declare_rt_priority, make_process_realtime
 from catheter_driver.node_main import run_node
 from catheter_driver.params import declare_float, declare_plain
 from catheter_driver.rt_loop import DeadlineLoop, LatencyWindow, MonotonicStamper
@@ -60,6 +61,7 @@ class ValveDriverNode(LifecycleNode):
             "watchdog_s": declare_float(self, "watchdog_s", _WATCHDOG),
             "reconnect_period_s": declare_float(self, "reconnect_period_s", _RECONNECT),
         }
+        self.rt_priority = declare_rt_priority(self)
         self.core: ValveDriverCore | None = None
         self._loops: list[DeadlineLoop] = []
         self._stamper = MonotonicStamper(self.get_clock().now().nanoseconds)
@@ -124,9 +126,19 @@ class ValveDriverNode(LifecycleNode):
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Start the control loop and the transmitter poll."""
+        make_process_realtime(self, self.rt_priority)
+        # The valve's loop outranks the transmitter poll: a slow serial reply must not
+        # delay the watchdog or a command.
         self._loops = [
-            DeadlineLoop(self.rate_hz, self._control_tick, name="valve_control"),
-            DeadlineLoop(self.rate_hz, self._poll_tick, name="transmitter_poll"),
+            DeadlineLoop(
+                self.rate_hz, self._control_tick, name="valve_control", rt_priority=self.rt_priority
+            ),
+            DeadlineLoop(
+                self.rate_hz,
+                self._poll_tick,
+                name="transmitter_poll",
+                rt_priority=max(0, self.rt_priority - 1),
+            ),
         ]
         for loop in self._loops:
             loop.start()
@@ -235,6 +247,7 @@ class ValveDriverNode(LifecycleNode):
         values: dict[str, object] = {
             "state": self._last_tick_state,
             "reason": self._last_reason,
+            "realtime": self._loops[0].realtime if self._loops else "not active",
             **self._latency.summary_ms(),
         }
         level = diagnostics.OK if self._last_tick_state == "ok" else diagnostics.WARN

@@ -1,0 +1,61 @@
+"""Topics a deadline loop reads itself, instead of through executor callbacks.
+
+Every executor callback in rclpy runs a few hundred microseconds of Python while holding the
+GIL, and a loop thread that wakes meanwhile waits for it. A compensator that only needs to
+know that ``tip/angle`` and ``pressure/measured`` keep arriving would pay that 500 times a
+second; here the loop takes what arrived at each tick (a few microseconds when nothing did)
+from subscriptions on a helper node that no executor spins.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import rclpy
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+
+
+def _never_called(_msg: Any) -> None:
+    """Subscriptions here are taken by :meth:`PolledTopics.poll`, never dispatched."""
+
+
+class PolledTopics:
+    """Subscriptions polled from the loop thread; :meth:`poll` names the topics that had news.
+
+    Args:
+        owner: the node the topics belong to (its context and namespace are used).
+        topics: topic name -> message type.
+        qos: QoS of every subscription (keep-last; the depth bounds the work per poll).
+    """
+
+    def __init__(self, owner: Node, topics: Mapping[str, type], qos: QoSProfile) -> None:
+        self.node = rclpy.create_node(
+            f"{owner.get_name()}_polled",
+            context=owner.context,
+            namespace=owner.get_namespace(),
+            enable_rosout=False,
+            start_parameter_services=False,
+        )
+        # raw=True: the loop only needs to know a message came, not to deserialise it.
+        self._subs = {
+            name: self.node.create_subscription(msg_type, name, _never_called, qos, raw=True)
+            for name, msg_type in topics.items()
+        }
+
+    def poll(self) -> list[str]:
+        """Take every message waiting; the topics that had at least one."""
+        fresh = []
+        for name, sub in self._subs.items():
+            got = False
+            with sub.handle:
+                while sub.handle.take_message(sub.msg_type, True) is not None:
+                    got = True
+            if got:
+                fresh.append(name)
+        return fresh
+
+    def destroy(self) -> None:
+        """Destroy the helper node and its subscriptions."""
+        self.node.destroy_node()
