@@ -37,8 +37,12 @@ lint: setup
 typecheck: setup
 	$(BIN)/mypy
 
+## Speed: the simulated rig, the c-LSTM's per-tick compute against the thesis's window, and
+## the whole graph over DDS at 250 Hz and 1 kHz (about 4 minutes; run on an idle machine).
 bench: setup
 	$(PY) bench/bench_plant.py
+	$(PY) bench/bench_clstm_step.py
+	$(PY) bench/bench_graph_timing.py
 
 ## The thesis's tables (8.1-8.4 modelling, 11.1-11.4 control) redone on the simulated rig,
 ## plus identification speed. About 25 minutes on 2 cores; see docs/benchmarks.md.
