@@ -315,3 +315,40 @@ def test_killed_compensator_is_vented_by_the_drivers_watchdog(children: Children
         assert late.size > 100 and np.all(late < 0.1e5), late.max()
         assert children.procs["compensator"].poll() == -signal.SIGKILL
         _assert_pressures_in_range(commands, measured)
+
+
+def test_a_1_khz_loop_follows_like_the_250_hz_one(children: Children, tmp_path: Path) -> None:
+    """`follow_trajectory --sim --control-rate-hz 1000`: the whole graph, the c-LSTM at 250 Hz
+    inside a 1 kHz loop. Timing targets are the benchmark's business (docs/benchmarks.md);
+    this checks that the loop really ran at 1 kHz and tracked as the 250 Hz one does."""
+    run_dir = tmp_path / "run"
+    run = children.run(
+        "follow_trajectory",
+        [
+            sys.executable,
+            "-m",
+            "catheter_control.follow_trajectory",
+            "--sim",
+            "--preset",
+            "traj_up_chirp",
+            "--control-rate-hz",
+            "1000",
+            "--out",
+            str(run_dir),
+            "--no-progress",
+        ],
+        timeout_s=150.0,
+    )
+    assert run.returncode == 0, f"exit {run.returncode}\n{run.stdout}\n{run.stderr}"
+    report = json.loads((run_dir / "report.json").read_text())
+    timing = report["timing"]
+    assert timing["control_rate_hz"] == 1000.0, timing
+    # 20 s of trajectory plus up to a report period either side: ~20,000 to 22,000 deadlines,
+    # of which the loop ran most (the benchmark measured 0.055 % missed; a loaded CI machine
+    # may miss more, which is not what this test is about).
+    deadlines = timing["ticks"] + timing["missed_deadlines"]
+    assert 19_000 <= deadlines <= 23_500, timing
+    assert timing["ticks"] >= 0.5 * deadlines, timing
+    # Measured 0.147 deg at 1 kHz (0.145 deg offline at 250 Hz): same bound as at 250 Hz.
+    assert report["overall"]["rmse_deg"] < RMSE_BOUND_DEG["traj_up_chirp"], report["overall"]
+    assert "Control loop at 1000 Hz" in run.stdout, run.stdout
