@@ -274,3 +274,20 @@ def wait_for_recorder(probe: Probe, topics: Sequence[str], timeout_s: float) -> 
         f"{recorder_values(probe)}"
     )
     return recorder_values(probe)
+
+
+def trajectory_msg(points: Sequence[tuple[float, float]]) -> Any:
+    """JointTrajectory for joint ``bend`` from (time_from_start [s], angle [deg]) points."""
+    import math
+
+    from builtin_interfaces.msg import Duration
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+    msg = JointTrajectory()
+    msg.joint_names = ["bend"]
+    for t, angle_deg in points:
+        point = JointTrajectoryPoint()
+        point.positions = [math.radians(angle_deg)]
+        point.time_from_start = Duration(sec=int(t), nanosec=round((t - int(t)) * 1e9))
+        msg.points.append(point)
+    return msg

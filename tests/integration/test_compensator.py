@@ -5,7 +5,6 @@ quiet, when it is killed, and when it is sent a trajectory it must refuse."""
 from __future__ import annotations
 
 import json
-import math
 import signal
 import sys
 import time
@@ -13,12 +12,19 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from builtin_interfaces.msg import Duration
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from graph_utils import Children, Probe, Stamped, diagnostic_values, node_argv, statuses
+from graph_utils import (
+    Children,
+    Probe,
+    Stamped,
+    diagnostic_values,
+    node_argv,
+    statuses,
+    trajectory_msg,
+)
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import FluidPressure, JointState
-from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+from trajectory_msgs.msg import JointTrajectory
 
 from catheter_control import qos
 from catheter_models.contract import (
@@ -58,18 +64,6 @@ RMSE_BOUND_DEG = {
     "traj_up_chirp": 0.5,
     "traj_arbitrary_small_variations": 1.15,
 }
-
-
-def _trajectory(points: list[tuple[float, float]]) -> JointTrajectory:
-    """A JointTrajectory for joint ``bend`` from (time [s], angle [deg]) pairs."""
-    msg = JointTrajectory()
-    msg.joint_names = ["bend"]
-    for t, angle_deg in points:
-        point = JointTrajectoryPoint()
-        point.positions = [math.radians(angle_deg)]
-        point.time_from_start = Duration(sec=int(t), nanosec=round((t - int(t)) * 1e9))
-        msg.points.append(point)
-    return msg
 
 
 def _gauge(messages: list[Stamped]) -> np.ndarray:
@@ -191,13 +185,13 @@ def test_tip_angle_stopping_ramps_the_pressure_down_and_says_why(children: Child
         _wait_ready(probe, pub, diags, children)
 
         # Up to 20 deg and hold: a run that would last 12 s.
-        _send(probe, pub, _trajectory([(0.0, 0.0), (2.0, 20.0), (12.0, 20.0)]))
+        _send(probe, pub, trajectory_msg([(0.0, 0.0), (2.0, 20.0), (12.0, 20.0)]))
         assert probe.spin_until(lambda: len(commands) > 250, 10.0), children.all_logs()
         probe.spin_for(2.5)
 
         # An invalid trajectory mid-run is refused, and the run in progress goes on.
         n_diag = len(diags)
-        _send(probe, pub, _trajectory([(0.0, 0.0), (1.0, float("nan")), (2.0, 0.0)]))
+        _send(probe, pub, trajectory_msg([(0.0, 0.0), (1.0, float("nan")), (2.0, 0.0)]))
         refused = probe.spin_until(
             lambda: any(
                 diagnostic_values(s)["trajectories_refused"] == "1"
@@ -254,7 +248,7 @@ def test_tip_angle_stopping_ramps_the_pressure_down_and_says_why(children: Child
 
         # A run cannot start while the laser is silent: refused with the reason.
         n_diag = len(diags)
-        _send(probe, pub, _trajectory([(0.0, 0.0), (2.0, 10.0)]))
+        _send(probe, pub, trajectory_msg([(0.0, 0.0), (2.0, 10.0)]))
         refused = probe.spin_until(
             lambda: any(
                 diagnostic_values(s)["last_refusal"].startswith("tip/angle stale")
@@ -269,7 +263,7 @@ def test_tip_angle_stopping_ramps_the_pressure_down_and_says_why(children: Child
         relay_on = True
         probe.spin_for(0.3)
         n_diag = len(diags)
-        _send(probe, pub, _trajectory([(0.0, 0.0), (1.0, 5.0), (2.0, 0.0)]))
+        _send(probe, pub, trajectory_msg([(0.0, 0.0), (1.0, 5.0), (2.0, 0.0)]))
         assert probe.spin_until(lambda: len(commands) > n_cmd + 250, 5.0)
         probe.spin_for(2.0)
         status = statuses(diags, COMPENSATOR)[-1]
@@ -286,7 +280,7 @@ def test_killed_compensator_is_vented_by_the_drivers_watchdog(children: Children
         diags = probe.subscribe(DiagnosticArray, DIAGNOSTICS.name, 10)
         pub = probe.node.create_publisher(JointTrajectory, TRAJECTORY.name, qos.TRAJECTORY)
         _wait_ready(probe, pub, diags, children)
-        _send(probe, pub, _trajectory([(0.0, 0.0), (2.0, 20.0), (20.0, 20.0)]))
+        _send(probe, pub, trajectory_msg([(0.0, 0.0), (2.0, 20.0), (20.0, 20.0)]))
         assert probe.spin_until(lambda: len(commands) > 250, 10.0), children.all_logs()
         probe.spin_for(2.5)
         assert _gauge(measured[-25:]).mean() > 1.5e5, "not at 20 deg before the kill"

@@ -11,7 +11,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from builtin_interfaces.msg import Duration
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from graph_utils import (
     Children,
@@ -19,6 +18,7 @@ from graph_utils import (
     diagnostic_values,
     node_argv,
     statuses,
+    trajectory_msg,
     wait_for_recorder,
 )
 from mcap.reader import make_reader
@@ -26,7 +26,7 @@ from mcap_ros2.decoder import DecoderFactory
 from rclpy.qos import qos_profile_sensor_data
 from rosbags.highlevel import AnyReader
 from sensor_msgs.msg import FluidPressure, JointState
-from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+from trajectory_msgs.msg import JointTrajectory
 
 from catheter_control import qos
 from catheter_control.bringup import sim_graph_specs
@@ -323,18 +323,6 @@ def test_out_of_range_parameter_refused(
     assert "Traceback" not in output, output
 
 
-def _trajectory(points: list[tuple[float, float]]) -> JointTrajectory:
-    """JointTrajectory for joint ``bend`` from (time_from_start [s], angle [deg]) points."""
-    msg = JointTrajectory()
-    msg.joint_names = ["bend"]
-    for t, angle_deg in points:
-        point = JointTrajectoryPoint()
-        point.positions = [float(np.radians(angle_deg))]
-        point.time_from_start = Duration(sec=int(t), nanosec=round((t - int(t)) * 1e9))
-        msg.points.append(point)
-    return msg
-
-
 def test_invalid_trajectory_refused_before_anything_moves(
     children: Children, tmp_path: Path
 ) -> None:
@@ -394,9 +382,9 @@ def test_invalid_trajectory_refused_before_anything_moves(
         assert ready, f"compensator not up:\n{children.log('compensator')}"
 
         invalid = {
-            "non-finite": _trajectory([(0.0, 0.0), (1.0, float("nan")), (2.0, 0.0)]),
+            "non-finite": trajectory_msg([(0.0, 0.0), (1.0, float("nan")), (2.0, 0.0)]),
             # 20 deg in 10 ms: 2000 deg/s, ten times the rate limit.
-            "step": _trajectory([(0.0, 0.0), (0.01, 20.0)]),
+            "step": trajectory_msg([(0.0, 0.0), (0.01, 20.0)]),
         }
         for n, (label, msg) in enumerate(invalid.items(), start=1):
             pub.publish(msg)
@@ -423,5 +411,5 @@ def test_invalid_trajectory_refused_before_anything_moves(
 
         # Control: a valid trajectory on the same topic does move it, so silence above meant
         # refusal and not a deaf subscription.
-        pub.publish(_trajectory([(0.0, 0.0), (0.5, 3.0), (1.0, 0.0)]))
+        pub.publish(trajectory_msg([(0.0, 0.0), (0.5, 3.0), (1.0, 0.0)]))
         assert probe.spin_until(lambda: len(commands) > 10, 5.0), "valid trajectory not followed"
