@@ -1,0 +1,1 @@
+"""The model lab: compare a model with measurements, locate where it fails, diagnose missing physical effects (docs/effects.md), add them, and keep the history."""  # noqa: E501
