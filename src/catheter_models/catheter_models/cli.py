@@ -9,6 +9,9 @@
                                            identify a thesis model from bags (playback
                                            for training) into a model directory
     catheter-lab models                    the model kinds and their settings
+    catheter-lab compare MODEL BAG... [-o OUT]
+                                           a fitted model against measured bags: metrics
+                                           per regime, worst segments, an HTML report
 
 The comparison and diagnosis commands join with the lab issue.
 """
@@ -202,6 +205,103 @@ def _cmd_effects(_args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_compare(args: argparse.Namespace) -> int:
+    """Compare a model directory with bags; every refusal is one line naming the problem.
+
+    Bags are resampled at the model's own rate unless ``--rate-hz`` asks for another, which
+    the comparison then refuses: a model only means something at the rate it was fitted at.
+    """
+    from datetime import datetime
+
+    from catheter_models.lab.compare import compare, write_report
+    from catheter_models.models import RateMismatchError, load_model
+    from catheter_models.models.data import recordings_from_bags
+
+    try:
+        if args.output is not None and args.output.exists() and any(args.output.iterdir()):
+            raise CatheterError(f"{args.output} exists and is not empty; choose a new directory")
+        model = load_model(args.model)
+        rate_hz = model.fitted_rate_hz if args.rate_hz is None else args.rate_hz
+        recordings = recordings_from_bags(args.bags, rate_hz=rate_hz)
+        result = compare(model, recordings, n_worst=args.worst, window_s=args.window_s)
+        print(result.text())
+        stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
+        out_dir = args.output or Path("lab") / f"compare-{args.model.resolve().name}-{stamp}"
+        names = ", ".join(r.name for r in recordings)
+        index = write_report(result, out_dir, title=f"{model.kind} ({args.model}) vs {names}")
+    except RateMismatchError as exc:
+        hint = "; or drop --rate-hz: bags are resampled at the model's rate by default"
+        print(f"catheter-lab compare: {exc}{hint}", file=sys.stderr)
+        return 2
+    except CatheterError as exc:
+        print(f"catheter-lab compare: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # an unreadable bag, an unwritable report directory
+        print(f"catheter-lab compare: {exc}", file=sys.stderr)
+        return 2
+    print(f"report: {index}")
+    return 0
+
+
+def _cmd_diagnose(args: argparse.Namespace) -> int:
+    """Residual tests, then a refit per missing effect; ranked, or 'adequate'."""
+    import json
+
+    from catheter_models.lab.diagnose import diagnose, plot_diagnosis
+    from catheter_models.lab.residuals import plot_residual_tests
+    from catheter_models.models import load_model
+    from catheter_models.models.data import recordings_from_bags
+
+    try:
+        model = load_model(args.model)
+        train = recordings_from_bags(args.train, rate_hz=model.fitted_rate_hz)
+        test = recordings_from_bags(args.test, rate_hz=model.fitted_rate_hz)
+        result = diagnose(model, train, test, effects=args.effect or None)
+        print(result.text())
+        if args.output is not None:
+            args.output.mkdir(parents=True, exist_ok=True)
+            (args.output / "diagnosis.json").write_text(
+                json.dumps(result.to_dict(), indent=2, default=float) + "\n"
+            )
+            plot_residual_tests(result.residual_report, args.output / "residual_tests.png")
+            if result.candidates:
+                plot_diagnosis(result, args.output / "diagnosis.png")
+            print(f"figures and diagnosis.json: {args.output}")
+    except (CatheterError, OSError) as exc:
+        print(f"catheter-lab diagnose: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+def _cmd_add(args: argparse.Namespace) -> int:
+    """Add an effect block to a grey-box (or DRDPI) model and refit it on bags."""
+    from catheter_models.lab.greybox import GreyBox
+    from catheter_models.models import load_model
+    from catheter_models.models.data import recordings_from_bags
+    from catheter_models.models.drdpi import DRDPI
+
+    try:
+        if args.output.exists():
+            raise CatheterError(f"{args.output} exists; choose a new model directory")
+        model = load_model(args.model)
+        if isinstance(model, DRDPI):
+            model = GreyBox.from_drdpi(model)
+        if not isinstance(model, GreyBox):
+            raise CatheterError(
+                f"{args.model} holds a {model.kind} model: effects are added to grey-box "
+                "models (or a DRDPI, the default chain)"
+            )
+        train = recordings_from_bags(args.train, rate_hz=model.fitted_rate_hz)
+        new = model.with_effect(args.effect).fit(train, progress=not args.no_progress)
+        new.save(args.output, training=train)
+        print(f"{' -> '.join(new.chain)}: {args.effect} = {new.block_values()[args.effect]}")
+        print(f"model: {args.output}")
+    except (CatheterError, OSError) as exc:
+        print(f"catheter-lab add: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser (separate so docs and tests can inspect it)."""
     parser = argparse.ArgumentParser(prog="catheter-lab", description=__doc__.splitlines()[0])
@@ -284,6 +384,60 @@ def build_parser() -> argparse.ArgumentParser:
 
     models = sub.add_parser("models", help="list the model kinds and their settings")
     models.set_defaults(func=_cmd_models)
+
+    comp = sub.add_parser(
+        "compare",
+        help="compare a fitted model with measured bags and locate where it fails",
+        description=(
+            "Run a model directory (any kind, forward or inverse) over bags from rest, print "
+            "RMSE / MAE (maximum absolute error) / NRMSE overall and per motion regime and the "
+            "worst segments (recording, time span, regime), and write an HTML report."
+        ),
+    )
+    comp.add_argument("model", type=Path, metavar="MODEL_DIR", help="a model directory")
+    comp.add_argument("bags", nargs="+", type=Path, metavar="BAG", help="measured bag(s)")
+    comp.add_argument(
+        "-o",
+        "--output",
+        type=Path,
+        default=None,
+        metavar="OUT_DIR",
+        help="new report directory (default: lab/compare-<model dir name>-<timestamp>)",
+    )
+    comp.add_argument(
+        "--worst", type=int, default=5, metavar="N", help="worst windows to report (default 5)"
+    )
+    comp.add_argument(
+        "--window-s",
+        type=float,
+        default=1.0,
+        help="window length [s] for locating the worst segments (default 1.0)",
+    )
+    comp.add_argument(
+        "--rate-hz",
+        type=float,
+        default=None,
+        help="resampling rate [Hz] (default: the rate the model was fitted at)",
+    )
+    comp.set_defaults(func=_cmd_compare)
+
+    diag = sub.add_parser("diagnose", help="which physical effect does a model lack? (docs/lab.md)")
+    diag.add_argument("model", type=Path, help="model directory")
+    diag.add_argument("--train", nargs="+", type=Path, required=True, help="training bags")
+    diag.add_argument("--test", nargs="+", type=Path, required=True, help="held-out bags")
+    diag.add_argument(
+        "--effect", action="append", help="test only this effect (repeatable; default: all)"
+    )
+    diag.add_argument("-o", "--output", type=Path, default=None, help="figures and JSON here")
+    diag.set_defaults(func=_cmd_diagnose)
+
+    add = sub.add_parser("add", help="add an effect block to a grey-box model and refit")
+    add.add_argument("effect", help="catalogue effect, e.g. pneumatic_lag (catheter-lab effects)")
+    add.add_argument("model", type=Path, help="grey-box or DRDPI model directory")
+    add.add_argument("-o", "--output", type=Path, required=True, help="new model directory")
+    add.add_argument("--train", nargs="+", type=Path, required=True, help="training bags")
+    add.add_argument("--no-progress", action="store_true")
+    add.set_defaults(func=_cmd_add)
     return parser
 
 

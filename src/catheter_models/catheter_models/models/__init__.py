@@ -29,6 +29,7 @@ MODEL_KINDS: Final[dict[str, tuple[str, str]]] = {
     "svr": ("catheter_models.models.svr", "SVRModel"),
     "lstm": ("catheter_models.models.lstm", "LSTMModel"),
     "clstm": ("catheter_models.models.lstm", "CLSTMModel"),
+    "greybox": ("catheter_models.lab.greybox", "GreyBox"),
 }
 
 

@@ -1,0 +1,285 @@
+"""Physical-effect blocks: the identifiable approximations of docs/effects.md.
+
+A grey-box model is a chain: input blocks (pressure to pressure), the thesis's DRDPI
+(play, rate dependence, deadband, asymmetry and saturation: the default chain), then output
+blocks (bend to bend). Each block here is the *approximation* a person would write down to
+identify an effect, not the plant's physics: the simulated plant fills the muscle through an
+orifice (a nonlinear flow), the block is a first-order lag; the plant creeps through two
+Maxwell branches, the block through one. So a diagnosis that finds the plant's effect with
+the block is a test of the method, not of code agreeing with itself.
+
+Blocks work on one recording at a time, from rest, in the chain's internal units: input
+blocks on pressure in bar, output blocks on bend in degrees; their parameters are SI.
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import ClassVar, Final, Literal
+
+import numpy as np
+import numpy.typing as npt
+from scipy import signal as sps
+
+from catheter_models.errors import ParameterError
+
+FloatArray = npt.NDArray[np.float64]
+Side = Literal["input", "output"]
+
+DEFAULT_CHAIN_EFFECTS: Final = ("play", "rate_dependence", "deadband", "asymmetry", "saturation")
+"""The effects the thesis's DRDPI already carries (the default chain)."""
+
+
+@dataclass(frozen=True)
+class BlockParam:
+    """A named, bounded block parameter in SI, with how a person reads it."""
+
+    name: str
+    unit: str
+    low: float
+    high: float
+    initial: float
+    doc: str
+    display_scale: float = 1.0
+    display_unit: str = ""
+
+    def display(self, value: float) -> str:
+        """The value as a person reads it (e.g. ms, Hz, deg/min)."""
+        unit = self.display_unit or self.unit
+        return f"{value * self.display_scale:.4g} {unit}"
+
+
+class Block(ABC):
+    """One effect's identifiable form: ``apply`` maps a recording's signal, from rest."""
+
+    effect: ClassVar[str]
+    side: ClassVar[Side]
+    params: ClassVar[tuple[BlockParam, ...]]
+    primary: ClassVar[str]
+    """The parameter the diagnosis reports (a time constant, a delay, a frequency...)."""
+    needs: ClassVar[str]
+    """What excitation identifies it, for the 'too little excitation' message."""
+
+    @abstractmethod
+    def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:
+        """The block's output for input ``x`` sampled at ``rate_hz`` with ``values``."""
+
+    def excitation_problem(self, inputs: Sequence[FloatArray], rate_hz: float) -> str:
+        """Why ``inputs`` (pressure, bar) cannot identify this block ('' if they can)."""
+        return ""
+
+    @classmethod
+    def defaults(cls) -> list[float]:
+        """Initial values of the parameters, in order."""
+        return [p.initial for p in cls.params]
+
+    @classmethod
+    def check(cls, values: Mapping[str, float]) -> list[float]:
+        """Values by name, in order, each within its bounds (ParameterError otherwise)."""
+        out = []
+        for p in cls.params:
+            if p.name not in values:
+                raise ParameterError(f"{cls.effect}: parameter {p.name!r} is missing")
+            v = float(values[p.name])
+            if not (math.isfinite(v) and p.low <= v <= p.high):
+                raise ParameterError(
+                    f"{cls.effect}.{p.name} = {v!r} is outside [{p.low:g}, {p.high:g}] {p.unit}"
+                )
+            out.append(v)
+        unknown = set(values) - {p.name for p in cls.params}
+        if unknown:
+            raise ParameterError(f"{cls.effect} has no parameter(s) {sorted(unknown)}")
+        return out
+
+
+def _lowpass1(x: FloatArray, rate_hz: float, time_constant_s: float) -> FloatArray:
+    """Exact discretisation of a first-order lag, starting at the first sample (rest)."""
+    a = math.exp(-1.0 / (rate_hz * time_constant_s))
+    y, _ = sps.lfilter([1.0 - a], [1.0, -a], x, zi=[a * x[0]])
+    out: FloatArray = np.asarray(y, dtype=float)
+    return out
+
+
+def _band_power_fraction(inputs: Sequence[FloatArray], rate_hz: float, above_hz: float) -> float:
+    """Share of the inputs' rate-signal power above ``above_hz`` (what fast effects need)."""
+    total = high = 0.0
+    for x in inputs:
+        if x.size < 16:
+            continue
+        dx = np.diff(x) * rate_hz
+        spec = np.abs(np.fft.rfft(dx - dx.mean())) ** 2
+        f = np.fft.rfftfreq(dx.size, 1.0 / rate_hz)
+        total += float(spec.sum())
+        high += float(spec[f >= above_hz].sum())
+    return high / total if total > 0.0 else 0.0
+
+
+class PneumaticLag(Block):
+    """Tube compliance and air compressibility as a first-order lag on pressure."""
+
+    effect = "pneumatic_lag"
+    side: ClassVar[Side] = "input"
+    params = (
+        BlockParam(
+            "time_constant_s", "s", 0.002, 0.5, 0.03, "lag of muscle behind valve", 1e3, "ms"
+        ),
+    )
+    primary = "time_constant_s"
+    needs = "pressure changes of a few hundred ms or faster"
+
+    def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:
+        """The muscle's pressure [bar]: the valve's through a first-order lag."""
+        return _lowpass1(x, rate_hz, values[0])
+
+
+class TransportDelay(Block):
+    """Valve dead time and pressure-wave travel as a pure delay (linear interpolation)."""
+
+    effect = "transport_delay"
+    side: ClassVar[Side] = "input"
+    params = (BlockParam("delay_s", "s", 0.0, 0.2, 0.01, "dead time", 1e3, "ms"),)
+    primary = "delay_s"
+    needs = "pressure changes faster than the delay"
+
+    def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:
+        """The pressure ``delay_s`` ago (the first sample before the recording began)."""
+        t = np.arange(x.size) / rate_hz
+        out: FloatArray = np.interp(t - values[0], t, x, left=x[0])
+        return out
+
+
+class Creep(Block):
+    """Viscoelastic relaxation: a share of each bend change arrives through one slow lag."""
+
+    effect = "creep"
+    side: ClassVar[Side] = "output"
+    params = (
+        BlockParam("fraction", "1", 0.0, 0.5, 0.05, "share of a step that creeps", 100.0, "%"),
+        BlockParam("time_constant_s", "s", 0.1, 30.0, 1.5, "creep time constant"),
+    )
+    # The share is what data pins down; the single time constant is a compromise between
+    # the real material's several (the plant has two, at tau/2 and 2 tau).
+    primary = "fraction"
+    needs = "plateaus of at least a second after pressure steps"
+
+    def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:
+        """The bend [deg] with ``fraction`` of every change delayed by a slow lag."""
+        fraction, tau = values
+        out: FloatArray = (1.0 - fraction) * x + fraction * _lowpass1(x, rate_hz, tau)
+        return out
+
+    def excitation_problem(self, inputs: Sequence[FloatArray], rate_hz: float) -> str:
+        """Creep shows only where the pressure holds still after a change."""
+        # A plateau: the pressure holds within 2 % of full scale for 1 s after moving.
+        window = max(2, round(rate_hz))
+        for x in inputs:
+            if x.size <= window:
+                continue
+            spread = np.lib.stride_tricks.sliding_window_view(x, window)
+            flat = (spread.max(axis=1) - spread.min(axis=1)) < 0.06
+            if flat.any() and float(np.ptp(x)) > 0.5:
+                return ""
+        return "no plateau of 1 s or longer after a pressure change: creep cannot show"
+
+
+class TipDynamics(Block):
+    """Tip inertia against bending stiffness: a second-order low-pass on the bend."""
+
+    effect = "tip_dynamics"
+    side: ClassVar[Side] = "output"
+    params = (
+        BlockParam("natural_frequency_hz", "Hz", 1.0, 40.0, 10.0, "undamped natural frequency"),
+        BlockParam("damping_ratio", "1", 0.02, 1.5, 0.5, "damping ratio"),
+    )
+    primary = "natural_frequency_hz"
+    needs = "pressure steps or ramps faster than the tip's period (content above 1 Hz)"
+
+    def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:
+        """The bend [deg] through a unit-gain second-order low-pass (zero-order hold)."""
+        f_hz, zeta = values
+        w = 2.0 * math.pi * f_hz
+        num, den, _ = sps.cont2discrete(([w * w], [1.0, 2.0 * zeta * w, w * w]), 1.0 / rate_hz)
+        b = np.asarray(num, dtype=float).ravel()
+        a = np.asarray(den, dtype=float).ravel()
+        zi = sps.lfilter_zi(b, a) * x[0]
+        y, _ = sps.lfilter(b, a, x, zi=zi)
+        out: FloatArray = np.asarray(y, dtype=float)
+        return out
+
+    def excitation_problem(self, inputs: Sequence[FloatArray], rate_hz: float) -> str:
+        """Tip dynamics show only where the pressure moves faster than about 1 Hz."""
+        share = _band_power_fraction(inputs, rate_hz, 1.0)
+        if share < 0.02:
+            return (
+                f"only {100 * share:.1f} % of the pressure rate's power lies above 1 Hz: "
+                "tip dynamics need fast steps or ramps"
+            )
+        return ""
+
+
+class Drift(Block):
+    """Slow offset drift over a session: a linear trend from each recording's start."""
+
+    effect = "drift"
+    side: ClassVar[Side] = "output"
+    params = (
+        BlockParam(
+            "rate_rad_per_s",
+            "rad/s",
+            math.radians(-10.0) / 60.0,
+            math.radians(10.0) / 60.0,
+            0.0,
+            "drift rate",
+            math.degrees(1.0) * 60.0,
+            "deg/min",
+        ),
+    )
+    primary = "rate_rad_per_s"
+    needs = "recordings of a minute or longer"
+
+    def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:
+        """The bend [deg] plus a trend from the recording's start."""
+        # Internal output unit is degrees: the rate is stored in rad/s.
+        out: FloatArray = x + math.degrees(values[0]) * np.arange(x.size) / rate_hz
+        return out
+
+    def excitation_problem(self, inputs: Sequence[FloatArray], rate_hz: float) -> str:
+        """A trend needs time to tell apart from the hysteresis."""
+        longest_s = max((x.size / rate_hz for x in inputs), default=0.0)
+        if longest_s < 30.0:
+            return f"the longest recording lasts {longest_s:.0f} s: drift needs 30 s or more"
+        return ""
+
+
+BLOCKS: Final[Mapping[str, type[Block]]] = {
+    b.effect: b for b in (TransportDelay, PneumaticLag, Creep, TipDynamics, Drift)
+}
+"""Blocks by effect name, in chain order within each side."""
+
+
+def block(effect: str) -> Block:
+    """The block of ``effect``; ParameterError names the known ones."""
+    if effect in DEFAULT_CHAIN_EFFECTS:
+        raise ParameterError(
+            f"{effect!r} is part of the default chain (the DRDPI) already; blocks that can be "
+            f"added: {', '.join(BLOCKS)}"
+        )
+    cls = BLOCKS.get(effect)
+    if cls is None:
+        raise ParameterError(
+            f"unknown effect {effect!r}; blocks that can be added: {', '.join(BLOCKS)} "
+            f"(the DRDPI carries {', '.join(DEFAULT_CHAIN_EFFECTS)})"
+        )
+    return cls()
+
+
+def ordered(effects: Sequence[str]) -> tuple[str, ...]:
+    """Effects in chain order (input blocks, then output blocks, catalogue order); checked."""
+    for e in effects:
+        block(e)
+    if len(set(effects)) != len(effects):
+        raise ParameterError(f"an effect is listed twice: {list(effects)}")
+    return tuple(e for e in BLOCKS if e in effects)

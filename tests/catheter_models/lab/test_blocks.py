@@ -1,0 +1,118 @@
+"""Effect blocks and the grey-box chain: named, bounded, and what they claim to be."""
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from catheter_models.errors import ParameterError
+from catheter_models.lab.blocks import BLOCKS, block, ordered
+from catheter_models.lab.greybox import GreyBox
+from catheter_models.models import load_model
+from catheter_models.models.base import ModelError
+from catheter_models.models.data import simulate_recordings
+from catheter_models.models.drdpi import DRDPI
+
+RATE_HZ = 250.0
+
+
+def step(n: int = 2500, at: int = 250) -> np.ndarray:
+    x = np.zeros(n)
+    x[at:] = 1.0
+    return x
+
+
+def test_lag_reaches_63_percent_after_one_time_constant() -> None:
+    y = block("pneumatic_lag").apply(step(), RATE_HZ, [0.1])
+    # The step enters at sample 250 and counts as the first of the 25 samples of 0.1 s.
+    assert y[250 + 24] == pytest.approx(1 - math.exp(-1), abs=1e-9)
+    assert y[0] == 0.0 and y[-1] == pytest.approx(1.0, abs=1e-6)
+
+
+def test_delay_shifts_by_the_delay() -> None:
+    y = block("transport_delay").apply(step(), RATE_HZ, [0.04])
+    assert y[250 + 9] == 0.0 and y[250 + 10] == pytest.approx(1.0)
+
+
+def test_creep_jumps_by_the_instant_share_then_creeps() -> None:
+    y = block("creep").apply(step(), RATE_HZ, [0.2, 1.0])
+    assert y[250] == pytest.approx(0.8, abs=0.01)
+    assert y[250 + 250] == pytest.approx(0.8 + 0.2 * (1 - math.exp(-1)), abs=0.01)
+
+
+def test_tip_dynamics_ring_at_the_natural_frequency() -> None:
+    y = block("tip_dynamics").apply(step(), RATE_HZ, [5.0, 0.05])
+    ripple = y[260:] - 1.0
+    crossings = np.flatnonzero(np.diff(np.sign(ripple)) != 0)
+    period_s = 2 * np.median(np.diff(crossings)) / RATE_HZ
+    assert period_s == pytest.approx(1 / (5.0 * math.sqrt(1 - 0.05**2)), rel=0.05)
+    assert y[-1] == pytest.approx(1.0, abs=0.05)
+
+
+def test_drift_adds_a_trend_in_degrees_from_a_rate_in_si() -> None:
+    y = block("drift").apply(np.zeros(2500), RATE_HZ, [math.radians(6.0) / 60])  # 6 deg/min
+    assert y[-1] == pytest.approx(0.1 * 2499 / RATE_HZ, rel=1e-9)
+
+
+def test_unknown_and_default_chain_effects_are_refused_by_name() -> None:
+    with pytest.raises(ParameterError, match=r"unknown effect 'backlash'.*pneumatic_lag"):
+        block("backlash")
+    with pytest.raises(ParameterError, match="'play' is part of the default chain"):
+        GreyBox(effects=["play"])
+    with pytest.raises(ParameterError, match="listed twice"):
+        ordered(["creep", "creep"])
+    # Physics fixes the order: input side, then output side, whatever the user wrote.
+    assert GreyBox(effects=["drift", "pneumatic_lag"]).chain == ("pneumatic_lag", "drdpi", "drift")
+
+
+def test_block_values_are_checked_against_their_bounds() -> None:
+    with pytest.raises(ParameterError, match=r"pneumatic_lag.time_constant_s = 5.0 is outside"):
+        BLOCKS["pneumatic_lag"].check({"time_constant_s": 5.0})
+
+
+@pytest.fixture(scope="module")
+def drdpi_and_data() -> tuple[DRDPI, list]:
+    recs = simulate_recordings(["train_zero_f0.4", "train_nonzero_f0.4"])
+    model = DRDPI(budget={"max_generations": 15, "wall_time_s": 10}).fit(recs, progress=False)
+    return model, recs
+
+
+def test_a_greybox_saves_loads_and_predicts_alike(tmp_path: Path, drdpi_and_data) -> None:
+    drdpi, recs = drdpi_and_data
+    base = GreyBox.from_drdpi(drdpi)
+    # The default chain is the DRDPI itself.
+    np.testing.assert_allclose(
+        base.predict(recs[0].pressure_pa), drdpi.predict(recs[0].pressure_pa)
+    )
+    lagged = base.with_effect("pneumatic_lag")
+    lagged.polish_evals = 20
+    lagged.fit(recs, progress=False)
+    out = tmp_path / "gb"
+    lagged.save(out, training=recs)
+    loaded = load_model(out)
+    assert isinstance(loaded, GreyBox) and loaded.chain == ("pneumatic_lag", "drdpi")
+    np.testing.assert_array_equal(
+        loaded.predict(recs[1].pressure_pa), lagged.predict(recs[1].pressure_pa)
+    )
+    stream = loaded.stream()
+    head = [stream.step(p) for p in recs[1].pressure_pa[:50]]
+    np.testing.assert_allclose(head, lagged.predict(recs[1].pressure_pa[:50]))
+
+
+def test_a_model_file_that_lists_an_effect_without_parameters_asks_for_a_refit(
+    tmp_path: Path, drdpi_and_data
+) -> None:
+    import json
+
+    from catheter_models.model_dir import ModelDirError
+
+    drdpi, recs = drdpi_and_data
+    out = tmp_path / "gb"
+    GreyBox.from_drdpi(drdpi).save(out, training=recs)
+    doc = json.loads((out / "greybox.json").read_text())
+    doc["effects"] = ["creep"]  # the one-line edit, without a refit
+    (out / "greybox.json").write_text(json.dumps(doc))
+    # The file's hash no longer matches: refused, never silently run without the block.
+    with pytest.raises((ModelError, ModelDirError), match=r"greybox\.json"):
+        load_model(out)
