@@ -66,16 +66,20 @@ SIGNAL_SETS = {
     "@training": "training_set",
     "@clstm_training": "clstm_training_set",
     "@model_tests": "TEST_PRESSURE_SIGNALS",
+    "@lab_training": "lab_training_specs",
+    "@lab_test": "lab_test_specs",
 }
 
 
 def _expand_signals(names: list[str]) -> list[str]:
     from catheter_models import signals
+    from catheter_models.lab import signals as lab_signals
 
     out: list[str] = []
     for name in names:
         if name in SIGNAL_SETS:
-            group = getattr(signals, SIGNAL_SETS[name])
+            module = lab_signals if name.startswith("@lab") else signals
+            group = getattr(module, SIGNAL_SETS[name])
             specs = group() if callable(group) else group
             out.extend(s if isinstance(s, str) else s.name for s in specs)
         else:
@@ -106,10 +110,11 @@ def _simulate_one(signal_name: str, config: PlantConfig, output: Path) -> None:
     import numpy as np
 
     from catheter_models.bag import write_bag_from_arrays
+    from catheter_models.lab.signals import lab_spec
     from catheter_models.plant import Plant
     from catheter_models.signals import get_preset
 
-    spec = get_preset(signal_name)
+    spec = lab_spec(signal_name) or get_preset(signal_name)
     if spec.kind != "pressure":
         raise CatheterError(f"{signal_name!r} is an angle trajectory; simulate drives pressure")
     signal = spec.generate(config.rig["sample_rate_hz"])
@@ -274,7 +279,8 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
 
 
 def _cmd_add(args: argparse.Namespace) -> int:
-    """Add an effect block to a grey-box (or DRDPI) model and refit it on bags."""
+    """Add an effect block to a grey-box (or DRDPI) model, refit it, record both versions."""
+    from catheter_models.lab import history
     from catheter_models.lab.greybox import GreyBox
     from catheter_models.models import load_model
     from catheter_models.models.data import recordings_from_bags
@@ -292,12 +298,45 @@ def _cmd_add(args: argparse.Namespace) -> int:
                 "models (or a DRDPI, the default chain)"
             )
         train = recordings_from_bags(args.train, rate_hz=model.fitted_rate_hz)
+        test = recordings_from_bags(args.test or [], rate_hz=model.fitted_rate_hz)
         new = model.with_effect(args.effect).fit(train, progress=not args.no_progress)
         new.save(args.output, training=train)
         print(f"{' -> '.join(new.chain)}: {args.effect} = {new.block_values()[args.effect]}")
         print(f"model: {args.output}")
+        versions = history.load_history(args.lab)
+        parent = history.find(versions, args.model)
+        if parent is None:
+            parent = history.record(args.lab, args.model, model, train=train, test=test)
+        child = history.record(
+            args.lab,
+            args.output,
+            new,
+            train=train,
+            test=test,
+            added=args.effect,
+            parent=parent.version,
+        )
+        print(history.history_text(history.load_history(args.lab)))
+        print(f"history: {args.lab / history.HISTORY_FILE} (version {child.version})")
     except (CatheterError, OSError) as exc:
         print(f"catheter-lab add: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+def _cmd_history(args: argparse.Namespace) -> int:
+    """The lab's model versions and their errors; a plot of the error across versions."""
+    from catheter_models.lab import history
+
+    try:
+        versions = history.load_history(args.lab)
+        print(history.history_text(versions))
+        if versions:
+            out = args.output or args.lab / "history.png"
+            history.plot_history(versions, out)
+            print(f"plot: {out}")
+    except (CatheterError, OSError) as exc:
+        print(f"catheter-lab history: {exc}", file=sys.stderr)
         return 2
     return 0
 
@@ -436,8 +475,15 @@ def build_parser() -> argparse.ArgumentParser:
     add.add_argument("model", type=Path, help="grey-box or DRDPI model directory")
     add.add_argument("-o", "--output", type=Path, required=True, help="new model directory")
     add.add_argument("--train", nargs="+", type=Path, required=True, help="training bags")
+    add.add_argument("--test", nargs="+", type=Path, help="held-out bags scored in the history")
+    add.add_argument("--lab", type=Path, default=Path("lab"), help="the lab's directory (lab)")
     add.add_argument("--no-progress", action="store_true")
     add.set_defaults(func=_cmd_add)
+
+    hist = sub.add_parser("history", help="model versions and their errors, with a plot")
+    hist.add_argument("--lab", type=Path, default=Path("lab"), help="the lab's directory (lab)")
+    hist.add_argument("-o", "--output", type=Path, default=None, help="plot (lab/history.png)")
+    hist.set_defaults(func=_cmd_history)
     return parser
 
 

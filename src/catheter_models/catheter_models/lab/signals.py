@@ -37,3 +37,11 @@ def lab_training_specs() -> list[SignalSpec]:
 def lab_test_specs() -> list[SignalSpec]:
     """The thesis's four model test signals plus one plateau signal of another seed."""
     return [get_preset(n) for n in TEST_PRESSURE_SIGNALS] + [_plateaus("lab_plateaus_999", 999)]
+
+
+def lab_spec(name: str) -> SignalSpec | None:
+    """The lab's plateau signal called ``name`` (``lab_plateaus_<seed>``), else None."""
+    prefix = "lab_plateaus_"
+    if not name.startswith(prefix) or not name[len(prefix) :].isdigit():
+        return None
+    return _plateaus(name, int(name[len(prefix) :]))
