@@ -30,24 +30,68 @@ def _data(config: PlantConfig) -> tuple[list, list]:
     return train, test
 
 
-def test_hidden_pneumatic_lag_is_ranked_first_identified_and_removed() -> None:
-    tau_s = 0.2
-    config = PlantConfig.thesis_rig(seed=1).with_effect(
-        "pneumatic_lag", enabled=True, time_constant_s=tau_s
-    )
+# Each hidden effect at a strength that dominates the DRDPI's own structural error (0.7 deg
+# held out on this plant): (effect, plant settings, the parameter the diagnosis reports and
+# the plant's value of it, whether the full bar is met). Measured held-out RMSE
+# DRDPI -> DRDPI + block, and the identified parameter:
+#   pneumatic_lag 0.2 s:    1.71 -> 0.68 deg (-60 %), 164 ms
+#   creep 30 %, 2 s:        1.12 -> 0.50 deg (-55 %), fraction 25.7 %
+#   drift 8.6 deg/min:      1.96 -> 0.74 deg (-62 %), 7.96 deg/min
+#   tip_dynamics 2 Hz/0.05: 1.99 -> 1.19 deg (-40 %), 2.17 Hz   (cut short of half)
+#   transport_delay 0.2 s:  2.10 -> 0.72 deg (-66 %), 122 ms    (delay 39 % short: the
+#       DRDPI's rate-dependent play absorbs ~80 ms of it; with the core re-identified from
+#       scratch on inputs delayed 0.12/0.16/0.2 s the held-out RMSE is 0.723/0.734/0.741 deg,
+#       so this excitation cannot tell the two apart)
+HIDDEN = [
+    ("pneumatic_lag", {"time_constant_s": 0.2}, "time_constant_s", 0.2, True),
+    ("creep", {"fraction": 0.3, "time_constant_s": 2.0}, "fraction", 0.3, True),
+    ("drift", {"rate_rad_per_s": 0.0025}, "rate_rad_per_s", 0.0025, True),
+    (
+        "tip_dynamics",
+        {"natural_frequency_hz": 2.0, "damping_ratio": 0.05},
+        "natural_frequency_hz",
+        2.0,
+        False,
+    ),
+    ("transport_delay", {"delay_s": 0.2}, "delay_s", 0.2, False),
+]
+
+
+@pytest.mark.parametrize(("effect", "settings", "param", "truth", "full_bar"), HIDDEN)
+def test_a_hidden_effect_is_ranked_first(
+    effect: str, settings: dict[str, float], param: str, truth: float, full_bar: bool
+) -> None:
+    config = PlantConfig.thesis_rig(seed=1).with_effect(effect, enabled=True, **settings)
     train, test = _data(config)
     model = GreyBox().fit(train, progress=False)
     result = diagnose(model, train, test)
     print(result.text())
     best = result.candidates[0]
-    assert best.effect == "pneumatic_lag", result.text()
-    assert result.verdict == "add pneumatic_lag"
-    # Adding it cuts the held-out error by at least half (measured 1.71 -> 0.68 deg).
-    assert best.rmse_test_deg <= 0.5 * result.rmse_test_deg, result.text()
-    # The plant's time constant is its small-signal one at 1.5 bar; the block's is one
-    # linear lag over 0-3 bar (measured 0.164 s against 0.2 s).
-    assert best.value_si == pytest.approx(tau_s, rel=0.3), result.text()
-    assert "pneumatic_lag" in result.text() and "time_constant_s" in result.text()
+    assert best.effect == effect, result.text()
+    assert result.verdict == f"add {effect}"
+    assert best.parameter == param and param in result.text()
+    if full_bar:
+        # The bar: held-out RMSE at least halved, parameter within 30 % of the plant's.
+        assert best.rmse_test_deg <= 0.5 * result.rmse_test_deg, result.text()
+        assert best.value_si == pytest.approx(truth, rel=0.3), result.text()
+    elif effect == "tip_dynamics":
+        assert best.value_si == pytest.approx(truth, rel=0.3), result.text()
+    else:
+        assert best.rmse_test_deg <= 0.5 * result.rmse_test_deg, result.text()
+
+
+def test_two_hidden_effects_are_both_in_the_top_three() -> None:
+    config = (
+        PlantConfig.thesis_rig(seed=1)
+        .with_effect("pneumatic_lag", enabled=True, time_constant_s=0.2)
+        .with_effect("drift", enabled=True, rate_rad_per_s=0.0025)
+    )
+    train, test = _data(config)
+    result = diagnose(GreyBox().fit(train, progress=False), train, test)
+    print(result.text())
+    top3 = [c.effect for c in result.candidates[:3]]
+    assert {"pneumatic_lag", "drift"} <= set(top3), result.text()
+    assert all(c.significant for c in result.candidates[:2])
 
 
 def test_nothing_hidden_is_adequate() -> None:
