@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 PY := $(BIN)/python
 PRESET ?= traj_descending_sine
 
-.PHONY: setup demo test test-fast test-slow lint typecheck bench bench-models figures sample-bags \
+.PHONY: setup demo test test-fast test-slow lint typecheck bench bench-models lab-example figures sample-bags \
 	shipped-models colcon clean
 
 setup: $(VENV)/.installed
@@ -43,6 +43,11 @@ bench: setup
 	$(PY) bench/bench_plant.py
 	$(PY) bench/bench_clstm_step.py
 	$(PY) bench/bench_graph_timing.py
+	$(PY) bench/bench_lab.py
+
+## The lab's worked example (docs/lab.md): hidden pneumatic lag, diagnose, add, history.
+lab-example: setup
+	$(PY) scripts/lab_worked_example.py --docs
 
 ## The thesis's tables (8.1-8.4 modelling, 11.1-11.4 control) redone on the simulated rig,
 ## plus identification speed. About 25 minutes on 2 cores; see docs/benchmarks.md.

@@ -280,7 +280,7 @@ def plot_diagnosis(diagnosis: Diagnosis, path: Path) -> Path:
     )
     ax.set_ylabel("held-out RMSE [deg]")
     ax.set_title(f"{' -> '.join(diagnosis.chain)}: verdict {diagnosis.verdict}")
-    ax.legend(loc="upper right", fontsize=8)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.3), fontsize=8, frameon=False)
     plt.setp(ax.get_xticklabels(), rotation=20, ha="right")
     fig.savefig(path, dpi=110)
     plt.close(fig)
