@@ -1,11 +1,12 @@
 """The lab's speed: compare plus diagnose on a 5-minute 250 Hz recording (target <= 60 s).
 
-The session is the lab's training signals then its held-out signals (about 5.4 minutes at
-250 Hz, 81,000 samples) from a simulated rig with a pneumatic lag of 0.2 s hidden in it. A
-DRDPI is fitted on the training part first (not timed: the model exists before a person
-asks what it lacks). Timed: ``compare`` on the whole session with its HTML report and
-figures, then ``diagnose`` with its figures (residual tests and a refit per catalogue effect
-the DRDPI lacks) with the training part to fit and the held-out part to score.
+The session is the lab's training signals then its held-out signals (6.8 minutes at 250 Hz,
+101,300 samples: longer than the 5 minutes the target names) from a simulated rig with a
+pneumatic lag of 0.2 s hidden in it. A DRDPI is fitted on the training part first (not
+timed: the model exists before a person asks what it lacks). Timed: ``compare`` on the
+whole session with its HTML report and figures, then ``diagnose`` with its figures
+(residual tests and a refit per catalogue effect the DRDPI lacks) with the training part
+to fit and the held-out part to score.
 
 Baseline: the same diagnosis done the obvious way, re-identifying every candidate chain
 from scratch (the DRDPI's global search again, then the polish) instead of warm-starting it

@@ -13,7 +13,14 @@
                                            a fitted model against measured bags: metrics
                                            per regime, worst segments, an HTML report
 
-The comparison and diagnosis commands join with the lab issue.
+    catheter-lab diagnose MODEL --train BAG... --test BAG...
+                                          which physical effect the model lacks (ranked,
+                                          or "adequate"), with the residual tests
+    catheter-lab add EFFECT MODEL -o NEW --train BAG...
+                                          add an effect block and refit (history kept)
+    catheter-lab history [--lab DIR]      model versions and the error across them
+
+The lab's guide: docs/lab.md.
 """
 
 from __future__ import annotations

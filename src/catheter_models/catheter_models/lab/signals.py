@@ -2,7 +2,9 @@
 
 The thesis's DRDPI training set (eight decaying sines, 0.2-0.8 Hz) never holds the pressure
 still and never moves it fast, so creep and tip dynamics cannot show in it. The lab's sets
-add random plateaus (1-3 s) joined by ramps of up to 20 bar/s; held-out data uses other seeds.
+add random plateaus (1-3 s) joined by ramps of 0.5-2 s (at most 20 bar/s), and one signal
+with 0.05-0.5 s ramps (at most 30 bar/s), fast enough to ring the tip and to tell a transport
+delay from the DRDPI's rate-dependent lag; held-out data uses other seeds.
 """
 
 from __future__ import annotations
@@ -19,29 +21,46 @@ from catheter_models.signals import (
 )
 
 _PLATEAUS = "model_test_arbitrary_plateaus"
-FAST_RAMP_BAR_PER_S = 20.0
+SLOW_RAMP_BAR_PER_S = 20.0
+FAST_RAMP_BAR_PER_S = 30.0
+RAMP_S = (0.05, 0.5)
+"""Ramp lengths [s]: short enough to ring the tip and to tell a delay from a slow response."""
 
 
-def _plateaus(name: str, seed: int) -> SignalSpec:
+def _plateaus(name: str, seed: int, *, fast: bool = False) -> SignalSpec:
     base = get_preset(_PLATEAUS)
     if not isinstance(base, ArbitrarySpec):
         raise SignalError(f"{_PLATEAUS} is no longer a random-plateau signal")
-    return dataclasses.replace(base, name=name, seed=seed, max_ramp_rate=FAST_RAMP_BAR_PER_S)
+    if fast:
+        return dataclasses.replace(
+            base, name=name, seed=seed, ramp_s=RAMP_S, max_ramp_rate=FAST_RAMP_BAR_PER_S
+        )
+    return dataclasses.replace(base, name=name, seed=seed, max_ramp_rate=SLOW_RAMP_BAR_PER_S)
 
 
 def lab_training_specs() -> list[SignalSpec]:
-    """The thesis's DRDPI training set plus two 40 s plateau signals (seeds 100, 101)."""
-    return [*training_set(), _plateaus("lab_plateaus_100", 100), _plateaus("lab_plateaus_101", 101)]
+    """The thesis's DRDPI training set plus three 40 s plateau signals, one with fast ramps."""
+    return [
+        *training_set(),
+        _plateaus("lab_plateaus_100", 100),
+        _plateaus("lab_plateaus_101", 101),
+        _plateaus("lab_steps_102", 102, fast=True),
+    ]
 
 
 def lab_test_specs() -> list[SignalSpec]:
-    """The thesis's four model test signals plus one plateau signal of another seed."""
-    return [get_preset(n) for n in TEST_PRESSURE_SIGNALS] + [_plateaus("lab_plateaus_999", 999)]
+    """The thesis's four model test signals plus two plateau signals of other seeds."""
+    return [
+        *(get_preset(n) for n in TEST_PRESSURE_SIGNALS),
+        _plateaus("lab_plateaus_999", 999),
+        _plateaus("lab_steps_998", 998, fast=True),
+    ]
 
 
 def lab_spec(name: str) -> SignalSpec | None:
-    """The lab's plateau signal called ``name`` (``lab_plateaus_<seed>``), else None."""
-    prefix = "lab_plateaus_"
-    if not name.startswith(prefix) or not name[len(prefix) :].isdigit():
-        return None
-    return _plateaus(name, int(name[len(prefix) :]))
+    """The lab's signal ``lab_plateaus_<seed>`` or ``lab_steps_<seed>`` (fast), else None."""
+    for prefix, fast in (("lab_plateaus_", False), ("lab_steps_", True)):
+        seed = name[len(prefix) :]
+        if name.startswith(prefix) and seed.isdigit():
+            return _plateaus(name, int(seed), fast=fast)
+    return None
