@@ -200,7 +200,7 @@ class GreyBox(Model):
         return out
 
     def stream(self) -> _GreyBoxStream:
-        """Sample by sample; equal to :meth:`predict` (it reruns the blocks on a window)."""
+        """Sample by sample, equal to :meth:`predict`: reruns the chain on all input since reset."""
         self._fitted()
         return _GreyBoxStream(self)
 
