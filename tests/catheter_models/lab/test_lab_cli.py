@@ -107,3 +107,20 @@ def test_a_bag_written_with_rosbags_goes_through_the_lab(tmp_path: Path, capsys)
     )
     out = capsys.readouterr().out
     assert "drift: not testable here: the longest recording lasts 13 s" in out
+
+
+def test_the_lab_signal_sets_simulate_into_bags(tmp_path: Path, capsys) -> None:
+    from catheter_models.lab.signals import lab_spec, lab_test_specs, lab_training_specs
+    from catheter_models.models.data import recording_from_bag
+
+    names = [s.name for s in (*lab_training_specs(), *lab_test_specs())]
+    assert "lab_steps_102" in names and "lab_plateaus_999" in names
+    assert len(set(names)) == len(names)  # held-out signals are not training ones
+    fast, slow = lab_spec("lab_steps_7"), lab_spec("lab_plateaus_7")
+    assert fast is not None and slow is not None and lab_spec("lab_nonsense") is None
+    assert fast.generate(250.0).values_si.tolist() != slow.generate(250.0).values_si.tolist()
+    assert run(["simulate", "lab_steps_102", "-o", str(tmp_path / "bag")]) == 0
+    rec = recording_from_bag(tmp_path / "bag")
+    assert rec.duration_s > 30.0
+    # Fast ramps: the pressure moves faster than 10 bar/s somewhere.
+    assert np.max(np.abs(np.diff(rec.pressure_pa))) * 250.0 > 10.0e5
