@@ -38,6 +38,9 @@ from catheter_models.signals import TEST_TRAJECTORIES, get_preset
 _PLANT_STRAIGHT_DISTANCE_M = 0.065
 """The simulated rig's laser distance with the tip straight (plant rig parameter default)."""
 
+_LOOP_NODES = frozenset({"sim_hardware", "compensator", "valve_driver", "laser_angle"})
+"""Nodes with deadline loops, which take ``rt_priority``."""
+
 EXIT_REFUSED = 2
 EXIT_GRAPH = 3
 _START_TIMEOUT_S = 8.0
@@ -95,6 +98,14 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
         default=1.0,
         help="for a trajectory that does not start straight: move there from rest over this "
         "long, then hold as long again; not scored (0: start with the step)",
+    )
+    parser.add_argument(
+        "--rt-priority",
+        type=int,
+        choices=range(99),
+        metavar="0..98",
+        help="with --sim/--emulated-rig: SCHED_FIFO priority of the started nodes' loops "
+        "(0: normal scheduling; default: the nodes' own, 50)",
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     return parser.parse_args(argv)
@@ -175,6 +186,10 @@ def main(argv: list[str] | None = None) -> int:
             Calibration(_PLANT_STRAIGHT_DISTANCE_M, 0.0, 0, "emulated rig").save(calibration)
             recorder, _sim, compensator = specs
             specs = [recorder, *driver_specs(ports, calibration), compensator]
+        if args.rt_priority is not None:
+            for spec in specs:
+                if spec.name in _LOOP_NODES:
+                    spec.params["rt_priority"] = args.rt_priority
         graph = ProcessGraph(specs, args.namespace, log_dir=run_dir / "logs")
         what = "simulated rig" if args.sim else "emulated devices and the real drivers"
         print(f"follow_trajectory: starting the {what} (logs in {run_dir / 'logs'})")
@@ -380,9 +395,10 @@ def _run(
         print(f"follow_trajectory: cannot score the run: {exc}", file=sys.stderr)
         return EXIT_GRAPH
     print(result.text(plan.name))
-    # Reports from the last one before the first set-point to the first after the end.
-    assert started_at is not None
-    first = max([t for t, _ in data.compensator if t <= started_at], default=started_at)
+    # Reports from the last one before the first set-point to the first after the end (the
+    # loop above only ends with set-points received, so started_at is set).
+    run_start_s = started_at if started_at is not None else sent_at
+    first = max([t for t, _ in data.compensator if t <= run_start_s], default=run_start_s)
     timing = timing_summary(
         [v for t, v in data.compensator if t >= first],
         [v for t, v in data.driver if t >= first],
@@ -401,7 +417,7 @@ def _run(
             # The compensator's 1 Hz reports over the run: where in it deadlines were missed.
             "timing_series": [
                 {
-                    "t_s": round(t - started_at, 3),
+                    "t_s": round(t - run_start_s, 3),
                     **{
                         k: v.get(k, "")
                         for k in (

@@ -229,28 +229,21 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     from catheter_models.models import RateMismatchError, load_model
     from catheter_models.models.data import recordings_from_bags
 
+    if args.output is not None and args.output.exists() and any(args.output.iterdir()):
+        raise CatheterError(f"{args.output} exists and is not empty; choose a new directory")
+    model = load_model(args.model)
+    rate_hz = model.fitted_rate_hz if args.rate_hz is None else args.rate_hz
+    recordings = recordings_from_bags(args.bags, rate_hz=rate_hz)
     try:
-        if args.output is not None and args.output.exists() and any(args.output.iterdir()):
-            raise CatheterError(f"{args.output} exists and is not empty; choose a new directory")
-        model = load_model(args.model)
-        rate_hz = model.fitted_rate_hz if args.rate_hz is None else args.rate_hz
-        recordings = recordings_from_bags(args.bags, rate_hz=rate_hz)
         result = compare(model, recordings, n_worst=args.worst, window_s=args.window_s)
-        print(result.text())
-        stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
-        out_dir = args.output or Path("lab") / f"compare-{args.model.resolve().name}-{stamp}"
-        names = ", ".join(r.name for r in recordings)
-        index = write_report(result, out_dir, title=f"{model.kind} ({args.model}) vs {names}")
     except RateMismatchError as exc:
         hint = "; or drop --rate-hz: bags are resampled at the model's rate by default"
-        print(f"catheter-lab compare: {exc}{hint}", file=sys.stderr)
-        return 2
-    except CatheterError as exc:
-        print(f"catheter-lab compare: {exc}", file=sys.stderr)
-        return 2
-    except OSError as exc:  # an unreadable bag, an unwritable report directory
-        print(f"catheter-lab compare: {exc}", file=sys.stderr)
-        return 2
+        raise RateMismatchError(f"{exc}{hint}") from None
+    print(result.text())
+    stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
+    out_dir = args.output or Path("lab") / f"compare-{args.model.resolve().name}-{stamp}"
+    names = ", ".join(r.name for r in recordings)
+    index = write_report(result, out_dir, title=f"{model.kind} ({args.model}) vs {names}")
     print(f"report: {index}")
     return 0
 
@@ -264,24 +257,20 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     from catheter_models.models import load_model
     from catheter_models.models.data import recordings_from_bags
 
-    try:
-        model = load_model(args.model)
-        train = recordings_from_bags(args.train, rate_hz=model.fitted_rate_hz)
-        test = recordings_from_bags(args.test, rate_hz=model.fitted_rate_hz)
-        result = diagnose(model, train, test, effects=args.effect or None)
-        print(result.text())
-        if args.output is not None:
-            args.output.mkdir(parents=True, exist_ok=True)
-            (args.output / "diagnosis.json").write_text(
-                json.dumps(result.to_dict(), indent=2, default=float) + "\n"
-            )
-            plot_residual_tests(result.residual_report, args.output / "residual_tests.png")
-            if result.candidates:
-                plot_diagnosis(result, args.output / "diagnosis.png")
-            print(f"figures and diagnosis.json: {args.output}")
-    except (CatheterError, OSError) as exc:
-        print(f"catheter-lab diagnose: {exc}", file=sys.stderr)
-        return 2
+    model = load_model(args.model)
+    train = recordings_from_bags(args.train, rate_hz=model.fitted_rate_hz)
+    test = recordings_from_bags(args.test, rate_hz=model.fitted_rate_hz)
+    result = diagnose(model, train, test, effects=args.effect or None)
+    print(result.text())
+    if args.output is not None:
+        args.output.mkdir(parents=True, exist_ok=True)
+        (args.output / "diagnosis.json").write_text(
+            json.dumps(result.to_dict(), indent=2, default=float) + "\n"
+        )
+        plot_residual_tests(result.residual_report, args.output / "residual_tests.png")
+        if result.candidates:
+            plot_diagnosis(result, args.output / "diagnosis.png")
+        print(f"figures and diagnosis.json: {args.output}")
     return 0
 
 
@@ -293,41 +282,37 @@ def _cmd_add(args: argparse.Namespace) -> int:
     from catheter_models.models.data import recordings_from_bags
     from catheter_models.models.drdpi import DRDPI
 
-    try:
-        if args.output.exists():
-            raise CatheterError(f"{args.output} exists; choose a new model directory")
-        model = load_model(args.model)
-        if isinstance(model, DRDPI):
-            model = GreyBox.from_drdpi(model)
-        if not isinstance(model, GreyBox):
-            raise CatheterError(
-                f"{args.model} holds a {model.kind} model: effects are added to grey-box "
-                "models (or a DRDPI, the default chain)"
-            )
-        train = recordings_from_bags(args.train, rate_hz=model.fitted_rate_hz)
-        test = recordings_from_bags(args.test or [], rate_hz=model.fitted_rate_hz)
-        new = model.with_effect(args.effect).fit(train, progress=not args.no_progress)
-        new.save(args.output, training=train)
-        print(f"{' -> '.join(new.chain)}: {args.effect} = {new.block_values()[args.effect]}")
-        print(f"model: {args.output}")
-        versions = history.load_history(args.lab)
-        parent = history.find(versions, args.model)
-        if parent is None:
-            parent = history.record(args.lab, args.model, model, train=train, test=test)
-        child = history.record(
-            args.lab,
-            args.output,
-            new,
-            train=train,
-            test=test,
-            added=args.effect,
-            parent=parent.version,
+    if args.output.exists():
+        raise CatheterError(f"{args.output} exists; choose a new model directory")
+    model = load_model(args.model)
+    if isinstance(model, DRDPI):
+        model = GreyBox.from_drdpi(model)
+    if not isinstance(model, GreyBox):
+        raise CatheterError(
+            f"{args.model} holds a {model.kind} model: effects are added to grey-box "
+            "models (or a DRDPI, the default chain)"
         )
-        print(history.history_text(history.load_history(args.lab)))
-        print(f"history: {args.lab / history.HISTORY_FILE} (version {child.version})")
-    except (CatheterError, OSError) as exc:
-        print(f"catheter-lab add: {exc}", file=sys.stderr)
-        return 2
+    train = recordings_from_bags(args.train, rate_hz=model.fitted_rate_hz)
+    test = recordings_from_bags(args.test or [], rate_hz=model.fitted_rate_hz)
+    new = model.with_effect(args.effect).fit(train, progress=not args.no_progress)
+    new.save(args.output, training=train)
+    print(f"{' -> '.join(new.chain)}: {args.effect} = {new.block_values()[args.effect]}")
+    print(f"model: {args.output}")
+    versions = history.load_history(args.lab)
+    parent = history.find(versions, args.model)
+    if parent is None:
+        parent = history.record(args.lab, args.model, model, train=train, test=test)
+    child = history.record(
+        args.lab,
+        args.output,
+        new,
+        train=train,
+        test=test,
+        added=args.effect,
+        parent=parent.version,
+    )
+    print(history.history_text(history.load_history(args.lab)))
+    print(f"history: {args.lab / history.HISTORY_FILE} (version {child.version})")
     return 0
 
 
@@ -335,16 +320,12 @@ def _cmd_history(args: argparse.Namespace) -> int:
     """The lab's model versions and their errors; a plot of the error across versions."""
     from catheter_models.lab import history
 
-    try:
-        versions = history.load_history(args.lab)
-        print(history.history_text(versions))
-        if versions:
-            out = args.output or args.lab / "history.png"
-            history.plot_history(versions, out)
-            print(f"plot: {out}")
-    except (CatheterError, OSError) as exc:
-        print(f"catheter-lab history: {exc}", file=sys.stderr)
-        return 2
+    versions = history.load_history(args.lab)
+    print(history.history_text(versions))
+    if versions:
+        out = args.output or args.lab / "history.png"
+        history.plot_history(versions, out)
+        print(f"plot: {out}")
     return 0
 
 
@@ -495,11 +476,18 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Entry point of ``catheter-lab``; errors print one line and exit 2."""
+    """Entry point of ``catheter-lab``; a refusal prints one line naming the command, exits 2.
+
+    Unreadable bags and unwritable output directories (OSError) are refusals too: a person
+    gets the path and the reason, not a traceback.
+    """
     args = build_parser().parse_args(argv)
+    command = " ".join(
+        str(v) for v in (args.command, getattr(args, "bag_command", None)) if v is not None
+    )
     try:
         code = args.func(args)
-    except CatheterError as exc:
-        print(f"catheter-lab: {exc}", file=sys.stderr)
+    except (CatheterError, OSError) as exc:
+        print(f"catheter-lab {command}: {exc}", file=sys.stderr)
         code = 2
     sys.exit(code)

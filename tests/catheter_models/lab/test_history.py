@@ -22,6 +22,9 @@ class _Fixed:
     def predict(self, x: np.ndarray) -> np.ndarray:
         return np.zeros(len(x)) + self.bias
 
+    def predict_recording(self, rec: Recording) -> np.ndarray:
+        return self.predict(rec.pressure_pa)
+
 
 def _rec() -> Recording:
     return Recording("r", 250.0, np.zeros(500), np.zeros(500), source="bag:abc")

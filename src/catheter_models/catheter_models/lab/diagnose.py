@@ -22,9 +22,11 @@ import numpy as np
 from catheter_models.errors import ParameterError
 from catheter_models.lab.blocks import BLOCKS, block
 from catheter_models.lab.greybox import GreyBox
+from catheter_models.lab.residuals import ResidualReport, residual_tests
 from catheter_models.models.base import FloatArray, Model, Recording
 from catheter_models.models.drdpi import DRDPI
-from catheter_models.units import rad_to_deg
+from catheter_models.models.evaluate import pooled_rmse
+from catheter_models.units import pa_to_bar, rad_to_deg
 
 MIN_REDUCTION = 0.10
 """Least share of the held-out RMSE an effect must remove to be reported."""
@@ -80,7 +82,7 @@ class Diagnosis:
     rmse_test_deg: float
     candidates: list[Candidate]
     untestable: dict[str, str]
-    residual_report: Any
+    residual_report: ResidualReport
     note: str = ""
 
     @property
@@ -100,11 +102,10 @@ class Diagnosis:
             f"  RMSE {self.rmse_train_deg:.3f} deg on training data, "
             f"{self.rmse_test_deg:.3f} deg held out",
         ]
-        if self.residual_report is not None:
-            sig = self.residual_report.significant()
-            lines.append(
-                "  residual tests beyond their 95 % band: " + (", ".join(sig) if sig else "none")
-            )
+        sig = self.residual_report.significant()
+        lines.append(
+            "  residual tests beyond their 95 % band: " + (", ".join(sig) if sig else "none")
+        )
         if self.note:
             lines.append(f"  {self.note}")
         if self.candidates:
@@ -136,21 +137,17 @@ class Diagnosis:
             "verdict": self.verdict,
             "candidates": [c.to_dict() for c in self.candidates],
             "untestable": self.untestable,
-            "residual_tests": (
-                self.residual_report.to_dict() if self.residual_report is not None else None
-            ),
+            "residual_tests": self.residual_report.to_dict(),
             "note": self.note,
         }
 
 
 def _rmse_deg(model: Model, recordings: Sequence[Recording]) -> float:
-    errs = [model.predict(r.pressure_pa) - r.angle_rad for r in recordings]
-    return float(rad_to_deg(np.sqrt(np.mean(np.concatenate(errs) ** 2))))
+    return float(rad_to_deg(pooled_rmse(model, recordings)))
 
 
-def _residual_report(model: Model, recordings: Sequence[Recording]) -> Any:
-    from catheter_models.lab.residuals import residual_tests
-
+def _residual_report(model: Model, recordings: Sequence[Recording]) -> tuple[ResidualReport, float]:
+    """The residual tests on ``recordings`` and the pooled RMSE of the same residual (SI)."""
     residual: list[FloatArray] = []
     inputs: list[FloatArray] = []
     segments: list[tuple[int, int]] = []
@@ -161,12 +158,11 @@ def _residual_report(model: Model, recordings: Sequence[Recording]) -> Any:
         inputs.append(np.asarray(x, dtype=float))
         segments.append((start, start + x.size))
         start += x.size
-    return residual_tests(
-        np.concatenate(residual),
-        np.concatenate(inputs),
-        recordings[0].rate_hz,
-        segments=segments,
+    pooled = np.concatenate(residual)
+    report = residual_tests(
+        pooled, np.concatenate(inputs), recordings[0].rate_hz, segments=segments
     )
+    return report, float(np.sqrt(np.mean(pooled**2)))
 
 
 def diagnose(
@@ -185,7 +181,7 @@ def diagnose(
     """
     if not train or not test:
         raise ParameterError("diagnose needs training recordings and held-out test recordings")
-    report = _residual_report(model, test)
+    report, rmse_test_si = _residual_report(model, test)
     if isinstance(model, DRDPI):
         model = GreyBox.from_drdpi(model)
     if not isinstance(model, GreyBox):
@@ -194,7 +190,7 @@ def diagnose(
             model_kind=model.kind,
             chain=[model.kind],
             rmse_train_deg=_rmse_deg(model, train) if forward else float("nan"),
-            rmse_test_deg=_rmse_deg(model, test) if forward else float("nan"),
+            rmse_test_deg=float(rad_to_deg(rmse_test_si)) if forward else float("nan"),
             candidates=[],
             untestable={},
             residual_report=report,
@@ -204,18 +200,16 @@ def diagnose(
             ),
         )
     wanted = list(effects) if effects is not None else [e for e in BLOCKS if e not in model.effects]
-    for e in wanted:
-        block(e)  # unknown names fail here, before any fitting
-    base_train, base_test = _rmse_deg(model, train), _rmse_deg(model, test)
+    for e in wanted:  # unknown or present names fail here, before any fitting
+        block(e)
+        if e in model.effects:
+            raise ParameterError(f"the model has {e!r} already: {' -> '.join(model.chain)}")
+    base_train, base_test = _rmse_deg(model, train), float(rad_to_deg(rmse_test_si))
     rate = train[0].rate_hz
-    from catheter_models.units import pa_to_bar
-
     xs = [pa_to_bar(r.pressure_pa) for r in train]
     candidates: list[Candidate] = []
     untestable: dict[str, str] = {}
     for e in wanted:
-        if e in model.effects:
-            raise ParameterError(f"the model has {e!r} already: {' -> '.join(model.chain)}")
         problem = block(e).excitation_problem(xs, rate)
         if problem:
             untestable[e] = problem
@@ -226,12 +220,7 @@ def diagnose(
         value = fitted.block_values()[e][spec.name]
         measured = (base_test - rmse_test) / base_test
         expected = (base_train - rmse_train) / base_train
-        evidence = "n/a"
-        if report is not None:
-            try:
-                evidence = report.by_name(EVIDENCE_TEST[e]).evidence()
-            except (KeyError, AttributeError, ValueError):
-                evidence = "n/a"
+        evidence = report.by_name(EVIDENCE_TEST[e]).evidence()
         candidates.append(
             Candidate(
                 effect=e,

@@ -29,7 +29,7 @@ from scipy import optimize
 
 from catheter_models.errors import ParameterError
 from catheter_models.hysteresis import operators as op
-from catheter_models.lab.blocks import BLOCKS, block, ordered
+from catheter_models.lab.blocks import BLOCKS, Block, block, ordered
 from catheter_models.model_dir import Manifest
 from catheter_models.models.base import (
     DataRequirement,
@@ -49,6 +49,7 @@ from catheter_models.models.drdpi import (
     rate_alpha,
     search_to_params,
 )
+from catheter_models.models.evaluate import pooled_rmse
 from catheter_models.models.identify import Budget
 from catheter_models.units import deg_to_rad, pa_to_bar, rad_to_deg
 
@@ -92,6 +93,8 @@ class GreyBox(Model):
         if isinstance(effects, str):
             raise ParameterError(f"effects must be a list of names, got the string {effects!r}")
         self.effects = ordered(list(effects))
+        # Built once: the polish runs the chain hundreds of times.
+        self._blocks: dict[str, Block] = {e: block(e) for e in self.effects}
         self._core_model = DRDPI(
             n_play=n_play,
             n_deadband=n_deadband,
@@ -179,13 +182,13 @@ class GreyBox(Model):
     ) -> FloatArray:
         for e in self.effects:
             if BLOCKS[e].side == "input":
-                x_bar = block(e).apply(x_bar, rate_hz, blocks[e])
+                x_bar = self._blocks[e].apply(x_bar, rate_hz, blocks[e])
         y = np.empty(x_bar.size)
         state = np.zeros(op.chain_state_size(coef))
         op.chain_run(np.ascontiguousarray(x_bar), coef, state, y)
         for e in self.effects:
             if BLOCKS[e].side == "output":
-                y = block(e).apply(y, rate_hz, blocks[e])
+                y = self._blocks[e].apply(y, rate_hz, blocks[e])
         return y
 
     def _fitted(self) -> None:
@@ -218,7 +221,7 @@ class GreyBox(Model):
         xs = [pa_to_bar(r.pressure_pa) for r in train]
         ys = [rad_to_deg(r.angle_rad) for r in train]
         for e in self.effects:
-            problem = block(e).excitation_problem(xs, rate)
+            problem = self._blocks[e].excitation_problem(xs, rate)
             if problem:
                 raise ParameterError(f"too little excitation to identify {e}: {problem}")
         if self._warm is not None:
@@ -228,7 +231,7 @@ class GreyBox(Model):
             core = core_model.fit(train, progress=progress).params_
             blocks = {}
         for e in self.effects:
-            blocks.setdefault(e, block(e).defaults())
+            blocks.setdefault(e, self._blocks[e].defaults())
         alpha = rate_alpha(self.rate_filter_s, rate)
 
         def coef_of(theta: FloatArray) -> FloatArray:
@@ -272,14 +275,7 @@ class GreyBox(Model):
         }
         if validation:
             extra["validation_rmse_deg"] = {
-                r.name: float(
-                    np.sqrt(
-                        np.mean(
-                            (rad_to_deg(self.predict(r.pressure_pa)) - rad_to_deg(r.angle_rad)) ** 2
-                        )
-                    )
-                )
-                for r in validation
+                r.name: float(rad_to_deg(pooled_rmse(self, [r]))) for r in validation
             }
         self.fit_report_ = FitReport(
             duration_s=time.perf_counter() - t0, train_loss=[polish_loss], extra=extra

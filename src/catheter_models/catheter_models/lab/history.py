@@ -20,6 +20,7 @@ import numpy as np
 
 from catheter_models.errors import CatheterError
 from catheter_models.models.base import Model, Recording
+from catheter_models.models.evaluate import pooled_rmse
 from catheter_models.units import rad_to_deg
 
 HISTORY_FILE = "history.jsonl"
@@ -51,9 +52,8 @@ class Version:
 
 def _rmse_deg(model: Model, recordings: Sequence[Recording]) -> float | None:
     if not recordings or model.direction != "forward":
-        return None
-    err = np.concatenate([model.predict(r.pressure_pa) - r.angle_rad for r in recordings])
-    return float(rad_to_deg(np.sqrt(np.mean(err**2))))
+        return None  # the history plots bend errors; an inverse model's are in pascals
+    return float(rad_to_deg(pooled_rmse(model, recordings)))
 
 
 def load_history(lab_dir: Path) -> list[Version]:

@@ -10,6 +10,7 @@ as everywhere in the stack; ``metrics.format("deg")`` prints them as the thesis 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -61,6 +62,16 @@ def modelling_score(model: Model, recording: Recording) -> ModellingResult:
     _, measured = recording.io(model.direction)
     metrics = compute_metrics(predicted, measured)
     return ModellingResult(recording, predicted, metrics)
+
+
+def pooled_rmse(model: Model, recordings: Sequence[Recording]) -> float:
+    """RMSE over every sample of ``recordings`` pooled, each predicted from rest (output SI).
+
+    Pooled, not averaged per recording: a long recording counts for its length, as the
+    lab's comparisons and its history score a model.
+    """
+    errors = [model.predict_recording(r) - r.io(model.direction)[1] for r in recordings]
+    return float(np.sqrt(np.mean(np.concatenate(errors) ** 2)))
 
 
 def run_compensator(
