@@ -42,12 +42,36 @@ def test_creep_jumps_by_the_instant_share_then_creeps() -> None:
 
 
 def test_tip_dynamics_ring_at_the_natural_frequency() -> None:
-    y = block("tip_dynamics").apply(step(), RATE_HZ, [5.0, 0.05])
+    y = block("tip_dynamics").apply(step(), RATE_HZ, [5.0, 0.05, 0.0])
     ripple = y[260:] - 1.0
     crossings = np.flatnonzero(np.diff(np.sign(ripple)) != 0)
     period_s = 2 * np.median(np.diff(crossings)) / RATE_HZ
     assert period_s == pytest.approx(1 / (5.0 * math.sqrt(1 - 0.05**2)), rel=0.05)
     assert y[-1] == pytest.approx(1.0, abs=0.05)
+
+
+def test_tip_dynamics_damp_a_bent_tip_more_than_a_straight_one() -> None:
+    # Released from 30 deg to straight, the tip rings freely; pulled from straight to 30 deg
+    # it swings against damping 0.05 + 2/rad * 0.52 rad = 1.1: no overshoot at all.
+    values = [5.0, 0.05, 2.0]
+    up = block("tip_dynamics").apply(30.0 * step(), RATE_HZ, values)
+    down = block("tip_dynamics").apply(30.0 * (1.0 - step()), RATE_HZ, values)
+    assert up.max() <= 30.0 + 1e-9
+    assert down.min() < -0.5 * 30.0  # a lightly damped swing past straight
+    # Without growth the two directions mirror each other (the block is linear then).
+    lin_up = block("tip_dynamics").apply(30.0 * step(), RATE_HZ, [5.0, 0.05, 0.0])
+    lin_down = block("tip_dynamics").apply(30.0 * (1.0 - step()), RATE_HZ, [5.0, 0.05, 0.0])
+    np.testing.assert_allclose(lin_up - 30.0, -lin_down, atol=1e-9)
+
+
+def test_tip_dynamics_do_not_depend_on_the_sample_rate() -> None:
+    # Sub-stepped at 1 ms: the same tip sampled at 100 Hz and at 1 kHz is the same tip.
+    values = [8.0, 0.1, 1.0]
+    t100 = np.arange(300) / 100.0
+    t1k = np.arange(3000) / 1000.0
+    y100 = block("tip_dynamics").apply(np.where(t100 >= 0.5, 20.0, 0.0), 100.0, values)
+    y1k = block("tip_dynamics").apply(np.where(t1k >= 0.5, 20.0, 0.0), 1000.0, values)
+    np.testing.assert_allclose(y100, y1k[::10], rtol=0, atol=1e-9)
 
 
 def test_drift_adds_a_trend_in_degrees_from_a_rate_in_si() -> None:

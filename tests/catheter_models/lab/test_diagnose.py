@@ -32,34 +32,33 @@ def _data(config: PlantConfig) -> tuple[list, list]:
 
 # Each hidden effect at a strength that dominates the DRDPI's own structural error (0.8 deg
 # held out on this plant): (effect, plant settings, the parameter the diagnosis reports and
-# the plant's value of it, whether the full bar is met). Measured held-out RMSE
+# the plant's value of it). Measured held-out RMSE
 # DRDPI -> DRDPI + block, and the identified parameter:
 #   pneumatic_lag 0.2 s:    1.77 -> 0.74 deg (-58 %), 163 ms
 #   creep 30 %, 2 s:        1.25 -> 0.55 deg (-56 %), fraction 26.0 %
 #   drift 8.6 deg/min:      2.03 -> 0.82 deg (-59 %), 8.15 deg/min
 #   transport_delay 0.2 s:  2.28 -> 0.80 deg (-65 %), 152 ms (only with the fast-ramp signal
 #       in the data: on 0.5-2 s ramps alone the DRDPI's rate-dependent play absorbed ~80 ms)
-#   tip_dynamics 2 Hz/0.05: 2.29 -> 1.37 deg (-40 %), 2.10 Hz   (cut short of half: in the
-#       plant the tip rings against friction, which a linear filter after the hysteresis
-#       cannot follow; the polish has converged, 300 or 1500 evaluations alike)
+#   tip_dynamics 2 Hz/0.05: 2.29 -> 1.07 deg (-53 %), 2.04 Hz   (a fixed-damping filter
+#       after the hysteresis reached only -40 %: the plant's tip rings freely when let go
+#       towards straight, against friction when bent; the block's damping grows with bend)
 HIDDEN = [
-    ("pneumatic_lag", {"time_constant_s": 0.2}, "time_constant_s", 0.2, True),
-    ("creep", {"fraction": 0.3, "time_constant_s": 2.0}, "fraction", 0.3, True),
-    ("drift", {"rate_rad_per_s": 0.0025}, "rate_rad_per_s", 0.0025, True),
+    ("pneumatic_lag", {"time_constant_s": 0.2}, "time_constant_s", 0.2),
+    ("creep", {"fraction": 0.3, "time_constant_s": 2.0}, "fraction", 0.3),
+    ("drift", {"rate_rad_per_s": 0.0025}, "rate_rad_per_s", 0.0025),
     (
         "tip_dynamics",
         {"natural_frequency_hz": 2.0, "damping_ratio": 0.05},
         "natural_frequency_hz",
         2.0,
-        False,
     ),
-    ("transport_delay", {"delay_s": 0.2}, "delay_s", 0.2, True),
+    ("transport_delay", {"delay_s": 0.2}, "delay_s", 0.2),
 ]
 
 
-@pytest.mark.parametrize(("effect", "settings", "param", "truth", "full_bar"), HIDDEN)
+@pytest.mark.parametrize(("effect", "settings", "param", "truth"), HIDDEN)
 def test_a_hidden_effect_is_ranked_first(
-    effect: str, settings: dict[str, float], param: str, truth: float, full_bar: bool
+    effect: str, settings: dict[str, float], param: str, truth: float
 ) -> None:
     config = PlantConfig.thesis_rig(seed=1).with_effect(effect, enabled=True, **settings)
     train, test = _data(config)
@@ -70,14 +69,9 @@ def test_a_hidden_effect_is_ranked_first(
     assert best.effect == effect, result.text()
     assert result.verdict == f"add {effect}"
     assert best.parameter == param and param in result.text()
-    if full_bar:
-        # The bar: held-out RMSE at least halved, parameter within 30 % of the plant's.
-        assert best.rmse_test_deg <= 0.5 * result.rmse_test_deg, result.text()
-        assert best.value_si == pytest.approx(truth, rel=0.3), result.text()
-    elif effect == "tip_dynamics":
-        assert best.value_si == pytest.approx(truth, rel=0.3), result.text()
-    else:
-        assert best.rmse_test_deg <= 0.5 * result.rmse_test_deg, result.text()
+    # The bar: held-out RMSE at least halved, parameter within 30 % of the plant's.
+    assert best.rmse_test_deg <= 0.5 * result.rmse_test_deg, result.text()
+    assert best.value_si == pytest.approx(truth, rel=0.3), result.text()
 
 
 def test_two_hidden_effects_are_both_in_the_top_three() -> None:

@@ -22,6 +22,7 @@ from typing import ClassVar, Final, Literal
 
 import numpy as np
 import numpy.typing as npt
+from numba import njit
 from scipy import signal as sps
 
 from catheter_models.errors import ParameterError
@@ -185,28 +186,72 @@ class Creep(Block):
         return "no plateau of 1 s or longer after a pressure change: creep cannot show"
 
 
+@njit(cache=True)
+def _tip_response(  # noqa: PLR0917 - numba compiles positional scalars only
+    x: FloatArray, dt_s: float, omega: float, zeta0: float, growth_per_deg: float, n_sub: int
+) -> FloatArray:  # pragma: no cover - compiled; exercised through TipDynamics.apply
+    """The tip's bend [deg] pulled towards ``x`` through a mass-spring whose damping grows.
+
+    Semi-implicit Euler with the damping implicit: stable for any damping, and accurate while
+    ``omega * dt_s / n_sub`` stays small (<= 0.25 at 40 Hz with 1 ms sub-steps).
+    """
+    h = dt_s / n_sub
+    y = x[0]
+    v = 0.0
+    out = np.empty_like(x)
+    for i in range(x.size):
+        # The bend at the sample instant, then the input held over the sample (zero-order
+        # hold): the same convention at every sample rate.
+        out[i] = y
+        zeta = zeta0 + growth_per_deg * max(x[i], 0.0)
+        for _ in range(n_sub):
+            v = (v + h * omega * omega * (x[i] - y)) / (1.0 + 2.0 * zeta * omega * h)
+            y += h * v
+    return out
+
+
 class TipDynamics(Block):
-    """Tip inertia against bending stiffness: a second-order low-pass on the bend."""
+    """Tip inertia against bending stiffness, damped more the harder the wire pulls.
+
+    A second-order bend pulled towards the hysteresis's (quasi-static) bend. Its damping
+    ratio grows with that bend: the steer wire presses on the tube in proportion to its
+    tension, so a bent tip swings against more friction than a straight one, and a tip let
+    go towards straight rings freely. A fixed damping ratio cannot be right at both ends:
+    fitted to the plant with a 2 Hz tip it removed 40 % of the held-out error, against 54 %
+    with the growth. The plant's tip rings against a Dahl friction state whose level follows
+    the muscle's pull; the block is a viscous damping that follows the bend: not the same
+    form.
+    """
 
     effect = "tip_dynamics"
     side: ClassVar[Side] = "output"
     params = (
         BlockParam("natural_frequency_hz", "Hz", 1.0, 40.0, 10.0, "undamped natural frequency"),
-        BlockParam("damping_ratio", "1", 0.02, 1.5, 0.5, "damping ratio"),
+        BlockParam("damping_ratio", "1", 0.02, 1.5, 0.5, "damping ratio with the tip straight"),
+        BlockParam(
+            "damping_per_rad",
+            "1/rad",
+            0.0,
+            20.0,
+            0.5,
+            "growth of the damping ratio per radian of bend (wire friction grows with pull)",
+        ),
     )
     primary = "natural_frequency_hz"
     needs = "pressure steps or ramps faster than the tip's period (content above 1 Hz)"
 
     def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:
-        """The bend [deg] through a unit-gain second-order low-pass (zero-order hold)."""
-        f_hz, zeta = values
-        w = 2.0 * math.pi * f_hz
-        num, den, _ = sps.cont2discrete(([w * w], [1.0, 2.0 * zeta * w, w * w]), 1.0 / rate_hz)
-        b = np.asarray(num, dtype=float).ravel()
-        a = np.asarray(den, dtype=float).ravel()
-        zi = sps.lfilter_zi(b, a) * x[0]
-        y, _ = sps.lfilter(b, a, x, zi=zi)
-        out: FloatArray = np.asarray(y, dtype=float)
+        """The bend [deg] through the tip's mass-spring, sub-stepped at 1 ms or finer."""
+        f_hz, zeta0, growth_per_rad = values
+        n_sub = max(1, math.ceil(1000.0 / rate_hz))
+        out: FloatArray = _tip_response(
+            np.ascontiguousarray(x, dtype=np.float64),
+            1.0 / rate_hz,
+            2.0 * math.pi * f_hz,
+            zeta0,
+            growth_per_rad * math.pi / 180.0,
+            n_sub,
+        )
         return out
 
     def excitation_problem(self, inputs: Sequence[FloatArray], rate_hz: float) -> str:
