@@ -51,3 +51,24 @@ def test_step_is_the_plant_step() -> None:
     hw.command(2e5, 0.0)
     s = hw.step(0.001)
     assert s.t_s == pytest.approx(hw.plant.sample_period_s)
+
+
+def test_a_command_stamped_before_the_last_one_applied_is_refused() -> None:
+    hw = SimHardware(CFG, command_timeout_s=0.1)
+    assert hw.command(1.0e5, now_s=0.0, stamp_ns=1_000_000_000)
+    assert not hw.command(2.0e5, now_s=0.001, stamp_ns=999_000_000), "reordered: older intent"
+    assert hw.command_pa == 1.0e5
+    assert hw.counters().refused_out_of_order == 1
+    assert "out-of-order" in hw.last_refusal and "1.0 ms" in hw.last_refusal
+    assert hw.command(2.0e5, now_s=0.002, stamp_ns=1_004_000_000)
+    assert hw.command_pa == 2.0e5
+
+
+def test_the_watchdog_vent_forgets_the_last_stamp() -> None:
+    # A new publisher (or a clock stepped back) is refused at most until the watchdog vents.
+    hw = SimHardware(CFG, command_timeout_s=0.1)
+    hw.command(1.0e5, now_s=0.0, stamp_ns=5_000_000_000)
+    assert not hw.command(1.0e5, now_s=0.05, stamp_ns=1_000_000_000)
+    hw.step(0.2)
+    assert hw.venting
+    assert hw.command(1.0e5, now_s=0.21, stamp_ns=1_000_000_000)

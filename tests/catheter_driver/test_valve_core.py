@@ -92,6 +92,16 @@ def test_follows_clamps_and_refuses_nan() -> None:
     assert max(valve.written) <= 3e5
 
 
+def test_out_of_order_commands_are_refused_until_a_vent() -> None:
+    core, _, _ = make()
+    assert core.command(1e5, 0.0, stamp_ns=2_000_000)
+    assert not core.command(2e5, 0.001, stamp_ns=1_000_000)
+    assert core.tick_setpoint(0.004, DT).setpoint_pa == 1e5, "the newer intent stays"
+    assert core.commands_out_of_order == 1 and "out-of-order" in core.last_refusal
+    core.vent()  # forgets the stamp: a restarted publisher with an earlier clock gets through
+    assert core.command(2e5, 0.008, stamp_ns=1_000_000)
+
+
 def test_watchdog_vents_within_its_timeout_and_says_why() -> None:
     core, valve, _ = make(watchdog_s=0.1, max_slew_pa_per_s=1e5)
     core.command(2e5, 0.0)

@@ -23,12 +23,15 @@ class CommandCounters:
         refused_nonfinite: NaN/inf commands refused (the last good command stays in force).
         clamped: commands outside [0, max_pressure_pa] applied at the limit.
         watchdog_vents: times the watchdog vented after commands stopped.
+        refused_out_of_order: commands stamped before the last one applied (reordered or
+            late), refused; the newer command stays in force.
     """
 
     received: int
     refused_nonfinite: int
     clamped: int
     watchdog_vents: int
+    refused_out_of_order: int = 0
 
 
 class SimHardware:
@@ -54,13 +57,21 @@ class SimHardware:
         self._refused = 0
         self._clamped = 0
         self._vents = 0
+        self._out_of_order = 0
+        self._last_stamp_ns: int | None = None
         self.last_refusal: str = ""
 
-    def command(self, gauge_pa: float, now_s: float) -> bool:
+    def command(self, gauge_pa: float, now_s: float, stamp_ns: int | None = None) -> bool:
         """Take a valve set-point (gauge [Pa]) received at monotonic time ``now_s``.
 
+        ``stamp_ns`` is the command's intended application time: one stamped before the last
+        command applied arrived out of order and is refused (applying it would step the
+        valve back to an older intent). The watchdog's vent forgets the last stamp, so a new
+        publisher, or a clock stepped back, is taken after at most one watchdog period.
+
         Returns:
-            False if the command was refused (non-finite); the previous one stays in force.
+            False if the command was refused (non-finite, or out of order); the previous
+            one stays in force.
         """
         with self._lock:
             self._received += 1
@@ -68,6 +79,16 @@ class SimHardware:
                 self._refused += 1
                 self.last_refusal = f"refused non-finite pressure command {gauge_pa!r}"
                 return False
+            if stamp_ns is not None:
+                if self._last_stamp_ns is not None and stamp_ns < self._last_stamp_ns:
+                    self._out_of_order += 1
+                    self.last_refusal = (
+                        "refused out-of-order pressure command: stamped "
+                        f"{(self._last_stamp_ns - stamp_ns) * 1e-6:.1f} ms before the last "
+                        "one applied"
+                    )
+                    return False
+                self._last_stamp_ns = stamp_ns
             clamped = min(max(gauge_pa, 0.0), self.max_pressure_pa)
             if clamped != gauge_pa:
                 self._clamped += 1
@@ -86,6 +107,8 @@ class SimHardware:
             if stale and not self._venting:
                 self._venting = True
                 self._vents += 1
+            if stale:
+                self._last_stamp_ns = None
             command = 0.0 if self._venting else self._command_pa
         return self.plant.step(command)
 
@@ -102,4 +125,6 @@ class SimHardware:
     def counters(self) -> CommandCounters:
         """Command counters since start."""
         with self._lock:
-            return CommandCounters(self._received, self._refused, self._clamped, self._vents)
+            return CommandCounters(
+                self._received, self._refused, self._clamped, self._vents, self._out_of_order
+            )

@@ -87,7 +87,7 @@ class SimHardwareNode(LoopNode):
         now_s = time.monotonic()
         self._latency.add((self.stamp_ns(now_s) - messages.ns_from_time(msg.header.stamp)) * 1e-9)
         gauge_pa = messages.gauge_pa_from(msg, self.ambient_pa)
-        if not self.hw.command(gauge_pa, now_s):
+        if not self.hw.command(gauge_pa, now_s, messages.ns_from_time(msg.header.stamp)):
             self.get_logger().warning(self.hw.last_refusal, throttle_duration_sec=1.0)
 
     def _tick(self, k: int, deadline_s: float) -> None:
@@ -118,11 +118,12 @@ class SimHardwareNode(LoopNode):
             level, message = diagnostics.ERROR, f"sample loop died: {self.loop.error!r}"
         elif self.hw.venting:
             level, message = diagnostics.WARN, "watchdog: no pressure command, valve vented"
-        elif counters.refused_nonfinite:
+        elif counters.refused_nonfinite or counters.refused_out_of_order:
             level, message = diagnostics.WARN, self.hw.last_refusal
         values: dict[str, object] = {
             "commands_received": counters.received,
             "commands_refused_nonfinite": counters.refused_nonfinite,
+            "commands_refused_out_of_order": counters.refused_out_of_order,
             "commands_clamped": counters.clamped,
             "watchdog_vents": counters.watchdog_vents,
             "venting": self.hw.venting,

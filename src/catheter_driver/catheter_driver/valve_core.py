@@ -146,19 +146,38 @@ class ValveDriverCore:
         self.commands_received = 0
         self.commands_refused = 0
         self.commands_clamped = 0
+        self.commands_out_of_order = 0
         self.watchdog_trips = 0
         self.last_refusal = ""
         self._watchdog_tripped = False
+        self._last_stamp_ns: int | None = None
 
     # -- intake (subscriber thread) ------------------------------------------------------
-    def command(self, gauge_pa: float, now_s: float) -> bool:
-        """Take a set-point (gauge [Pa]); False if refused (non-finite). Clamps to range."""
+    def command(self, gauge_pa: float, now_s: float, stamp_ns: int | None = None) -> bool:
+        """Take a set-point (gauge [Pa]); False if refused. Clamps to range.
+
+        Refused: non-finite values, and commands stamped (``stamp_ns``, the intended
+        application time) before the last one applied: reordered or late, applying them
+        would step the valve back to an older intent. Venting (watchdog, ~/vent, disable)
+        forgets the last stamp, so a new publisher or a clock stepped back gets through
+        after at most one watchdog period.
+        """
         with self._lock:
             self.commands_received += 1
             if not math.isfinite(gauge_pa):
                 self.commands_refused += 1
                 self.last_refusal = f"refused non-finite pressure command {gauge_pa!r}"
                 return False
+            if stamp_ns is not None:
+                if self._last_stamp_ns is not None and stamp_ns < self._last_stamp_ns:
+                    self.commands_out_of_order += 1
+                    self.last_refusal = (
+                        "refused out-of-order pressure command: stamped "
+                        f"{(self._last_stamp_ns - stamp_ns) * 1e-6:.1f} ms before the last "
+                        "one applied"
+                    )
+                    return False
+                self._last_stamp_ns = stamp_ns
             clamped = min(max(gauge_pa, self.min_pressure_pa), self.max_pressure_pa)
             if clamped != gauge_pa:
                 self.commands_clamped += 1
@@ -172,6 +191,7 @@ class ValveDriverCore:
         with self._lock:
             self._vent_requested = True
             self._last_command_s = None
+            self._last_stamp_ns = None
 
     def set_enabled(self, enabled: bool) -> None:
         """Disabled: vented, commands ignored until enabled again."""
@@ -179,6 +199,7 @@ class ValveDriverCore:
             self._enabled = enabled
             if not enabled:
                 self._last_command_s = None
+                self._last_stamp_ns = None
 
     @property
     def enabled(self) -> bool:
@@ -196,6 +217,7 @@ class ValveDriverCore:
                 state, reason, target = "vented", "vented by ~/vent", 0.0
             elif stale:
                 state, target = "watchdog", 0.0
+                self._last_stamp_ns = None
                 reason = (
                     "no pressure command yet"
                     if self._last_command_s is None and not self._watchdog_tripped

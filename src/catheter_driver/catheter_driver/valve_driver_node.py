@@ -196,7 +196,11 @@ class ValveDriverNode(LifecycleNode):
         self._latency.add(
             (self._stamper.ns(now_s) - messages.ns_from_time(msg.header.stamp)) * 1e-9
         )
-        if not core.command(messages.gauge_pa_from(msg, self.ambient_pa), now_s):
+        if not core.command(
+            messages.gauge_pa_from(msg, self.ambient_pa),
+            now_s,
+            messages.ns_from_time(msg.header.stamp),
+        ):
             self.get_logger().warning(core.last_refusal, throttle_duration_sec=1.0)
 
     def _control_tick(self, _k: int, deadline_s: float) -> None:
@@ -259,6 +263,7 @@ class ValveDriverNode(LifecycleNode):
                     "setpoint_bar": f"{core.setpoint_pa / 1e5:.4f}",
                     "commands_received": core.commands_received,
                     "commands_refused_nonfinite": core.commands_refused,
+                    "commands_refused_out_of_order": core.commands_out_of_order,
                     "commands_clamped": core.commands_clamped,
                     "watchdog_trips": core.watchdog_trips,
                     "valve_link": "up" if core.valve.up else f"down: {core.valve.error}",
