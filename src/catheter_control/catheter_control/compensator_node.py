@@ -120,9 +120,25 @@ class CompensatorNode(LoopNode):
         self._pub_cmd = self.create_publisher(FluidPressure, PRESSURE_COMMAND.name, qos.SENSOR)
         self._pub_des = self.create_publisher(JointState, ANGLE_DESIRED.name, qos.SENSOR)
         self._pub_diag = diagnostics.create_diagnostics_publisher(self)
-        self.create_subscription(
-            JointTrajectory, TRAJECTORY.name, self._on_trajectory, qos.TRAJECTORY
+        # Security: with this off nothing on the DDS network can make this node move the
+        # catheter (it still holds the line at rest, reports, and answers ~/stop).
+        self.accept_trajectories = bool(
+            declare_plain(
+                self,
+                "accept_trajectories",
+                True,
+                "subscribe to trajectory (false: nothing on the network can move the catheter)",
+            )
         )
+        if self.accept_trajectories:
+            self.create_subscription(
+                JointTrajectory, TRAJECTORY.name, self._on_trajectory, qos.TRAJECTORY
+            )
+        else:
+            self.get_logger().warning(
+                "accept_trajectories is false: trajectory is not subscribed, the catheter "
+                "stays at rest"
+            )
         # Polled by the loop, not dispatched by the executor: see catheter_driver.polled.
         self._sensors = PolledTopics(
             self,
@@ -253,6 +269,7 @@ class CompensatorNode(LoopNode):
                 "model_rate_hz": f"{self.model_rate_hz:g}" if self.model_rate_hz else "any",
                 "model_steps": model_steps,
                 "fault": fault,
+                "accept_trajectories": str(self.accept_trajectories).lower(),
                 "trajectories_accepted": accepted,
                 "trajectories_refused": refusals,
                 "last_refusal": last,
