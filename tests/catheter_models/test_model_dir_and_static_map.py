@@ -26,6 +26,29 @@ def test_tampered_weight_file_is_refused(tmp_path) -> None:
         read_model_dir(tmp_path / "m")
 
 
+@pytest.mark.parametrize(
+    "edit",
+    [
+        lambda raw: raw["files"].update({"w.json": "0" * 64}),  # a weight's recorded hash
+        lambda raw: raw.update(normalization={"scale": 2.0}),  # constants beside the weights
+        lambda raw: raw.update(kind="other"),
+    ],
+    ids=["weight hash", "normalization", "kind"],
+)
+def test_an_edited_manifest_is_refused(tmp_path, edit) -> None:
+    write_model_dir(tmp_path / "m", "demo", {}, {}, {"w.json": b"[1,2]"})
+    path = tmp_path / "m" / "manifest.json"
+    raw = json.loads(path.read_text())
+    edit(raw)
+    path.write_text(json.dumps(raw))
+    with pytest.raises(ModelDirError, match=r"manifest\.json fails its own sha256 check"):
+        read_model_dir(tmp_path / "m")
+    del raw["manifest_sha256"]  # removing the seal does not help
+    path.write_text(json.dumps(raw))
+    with pytest.raises(ModelDirError, match="has no manifest_sha256"):
+        read_model_dir(tmp_path / "m")
+
+
 def test_missing_file_wrong_kind_and_garbage_manifest(tmp_path) -> None:
     write_model_dir(tmp_path / "m", "demo", {}, {}, {"w.json": b"1"})
     with pytest.raises(ModelDirError, match="expected 'static_map'"):

@@ -50,8 +50,8 @@ class Manifest:
     format_version: int = FORMAT_VERSION
 
     def to_json(self) -> str:
-        """Stable, human-readable JSON."""
-        return json.dumps(
+        """Stable, human-readable JSON, sealed with its own hash (``manifest_sha256``)."""
+        return seal_manifest(
             {
                 "format_version": self.format_version,
                 "kind": self.kind,
@@ -62,10 +62,27 @@ class Manifest:
                 "metrics": dict(self.metrics),
                 "software_version": self.software_version,
                 "files": dict(self.files),
-            },
-            indent=2,
-            sort_keys=True,
+            }
         )
+
+
+MANIFEST_HASH_KEY = "manifest_sha256"
+"""The manifest's hash of itself: normalisation constants and the weight files' hashes live in
+the manifest, so an edit to it must fail the check as an edited weight file does."""
+
+
+def _manifest_digest(content: Mapping[str, Any]) -> str:
+    """sha256 of the manifest without its own hash, as canonical JSON (sorted, compact)."""
+    body = {k: v for k, v in content.items() if k != MANIFEST_HASH_KEY}
+    canonical = json.dumps(body, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    return hashlib.sha256(canonical.encode()).hexdigest()
+
+
+def seal_manifest(content: Mapping[str, Any]) -> str:
+    """``content`` as indented JSON with its ``manifest_sha256``."""
+    return json.dumps(
+        {**content, MANIFEST_HASH_KEY: _manifest_digest(content)}, indent=2, sort_keys=True
+    )
 
 
 def write_model_dir(
@@ -94,6 +111,22 @@ def write_model_dir(
     return manifest
 
 
+def _check_seal(manifest_path: Path, raw: Mapping[str, Any]) -> None:
+    sealed = raw.get(MANIFEST_HASH_KEY)
+    if sealed is None:
+        raise ModelDirError(
+            f"{manifest_path} has no {MANIFEST_HASH_KEY}: it was edited, or written by a "
+            "version that did not seal manifests; refusing to load it"
+        )
+    actual = _manifest_digest(raw)
+    if sealed != actual:
+        raise ModelDirError(
+            f"{manifest_path} fails its own sha256 check ({MANIFEST_HASH_KEY} "
+            f"{str(sealed)[:12]}..., content {actual[:12]}...): the manifest was modified or "
+            "damaged; refusing to load it"
+        )
+
+
 def read_model_dir(
     path: Path, expected_kind: str | None = None
 ) -> tuple[Manifest, dict[str, bytes]]:
@@ -109,6 +142,12 @@ def read_model_dir(
         raise ModelDirError(f"{path} is not a model directory: no {MANIFEST}")
     try:
         raw = json.loads(manifest_path.read_text())
+    except ValueError as exc:
+        raise ModelDirError(f"{manifest_path} is malformed: {exc}") from None
+    if not isinstance(raw, dict):
+        raise ModelDirError(f"{manifest_path} is malformed: not a JSON object")
+    _check_seal(manifest_path, raw)
+    try:
         manifest = Manifest(
             kind=str(raw["kind"]),
             inputs=dict(raw["inputs"]),

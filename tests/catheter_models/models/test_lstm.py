@@ -14,7 +14,7 @@ import pytest
 import torch
 
 from catheter_models.errors import ParameterError, SignalError
-from catheter_models.model_dir import ModelDirError
+from catheter_models.model_dir import ModelDirError, seal_manifest
 from catheter_models.models import load_model
 from catheter_models.models.base import InsufficientDataError, MinMaxScaler, ModelError
 from catheter_models.models.data import simulate_recording, simulate_recordings
@@ -260,6 +260,10 @@ def test_edited_normalization_is_refused(fitted_lstm: LSTMModel, tmp_path: Path)
     raw = json.loads(path.read_text())
     raw["normalization"]["output"]["hi"] *= 2.0
     path.write_text(json.dumps(raw))
+    with pytest.raises(ModelDirError, match=r"manifest\.json fails its own sha256 check"):
+        LSTMModel.load(tmp_path / "m")
+    # Resealed on purpose, the edit still disagrees with the constants inside the ONNX file.
+    path.write_text(seal_manifest(raw))
     with pytest.raises(ModelError, match="the manifest was edited, refusing to load"):
         LSTMModel.load(tmp_path / "m")
 
