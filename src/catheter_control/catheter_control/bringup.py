@@ -198,6 +198,8 @@ class ProcessGraph:
 
     def start(self) -> None:
         """Start every node."""
+        from catheter_driver.node_main import PARENT_PID_ENV  # imports rclpy: only when used
+
         for spec in self.specs:
             out = None
             if self.log_dir is not None:
@@ -208,7 +210,8 @@ class ProcessGraph:
                     spec.argv(self.namespace),
                     stdout=out,
                     stderr=subprocess.STDOUT if out else None,
-                    env=self.env,
+                    # The nodes watch this pid and shut down cleanly if it dies (kill -9).
+                    env={**self.env, PARENT_PID_ENV: str(os.getpid())},
                 )
             finally:
                 if out is not None:

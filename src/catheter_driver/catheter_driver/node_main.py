@@ -8,6 +8,7 @@ that check it: a stop request is always seen within ``poll_s``.
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 import threading
@@ -32,6 +33,17 @@ def install_stop_handlers() -> threading.Event:
     signal.signal(signal.SIGINT, handler)
     signal.signal(signal.SIGTERM, handler)
     return stop
+
+
+PARENT_PID_ENV = "CATHETER_PARENT_PID"
+"""Set by a launcher (catheter_control.bringup) to its pid: its nodes stop when it dies."""
+
+
+def _parent_to_follow() -> int | None:
+    value = os.environ.get(PARENT_PID_ENV, "")
+    if not value.isdigit() or int(value) != os.getppid():
+        return None  # not started by that launcher (an inherited variable): nothing to follow
+    return int(value)
 
 
 _SWITCH_INTERVAL_S = 0.0001
@@ -69,9 +81,17 @@ def run_nodes(
             for node in nodes:
                 if hasattr(node, "start"):
                     node.start()
+            parent_pid = _parent_to_follow()
             while not stop.is_set() and rclpy.ok():
                 executor.spin_once(timeout_sec=poll_s)
                 if until is not None and until(nodes):
+                    break
+                if parent_pid is not None and os.getppid() != parent_pid:
+                    # The launcher died without stopping us (kill -9): shut down cleanly
+                    # (loops stopped, bag closed, drivers vented) rather than run orphaned.
+                    rclpy.logging.get_logger("catheter").warning(
+                        f"launcher (pid {parent_pid}) is gone: shutting down"
+                    )
                     break
         except CatheterError as exc:
             rclpy.logging.get_logger("catheter").fatal(str(exc))
