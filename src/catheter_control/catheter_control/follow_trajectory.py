@@ -43,6 +43,9 @@ _LOOP_NODES = frozenset({"sim_hardware", "compensator", "valve_driver", "laser_a
 
 EXIT_REFUSED = 2
 EXIT_GRAPH = 3
+EXIT_STOPPED = 4
+"""The compensator stopped the run part-way (a stale sensor, a failed model): it ramped the
+pressure down and said why; the partial run is still reported."""
 _START_TIMEOUT_S = 8.0
 """The compensator holds a plan up to 5 s for its valve driver; allow for that and more."""
 
@@ -52,6 +55,7 @@ class _Collected:
     desired: list[tuple[float, float]] = field(default_factory=list)
     measured: list[tuple[float, float]] = field(default_factory=list)
     refusal: str = ""
+    stopped: str = ""
     recorder: dict[str, str] = field(default_factory=dict)
     # (monotonic receipt [s], status values) of the compensator and the commanded driver.
     compensator: list[tuple[float, dict[str, str]]] = field(default_factory=list)
@@ -215,7 +219,7 @@ def _run(
     lead_s: float,
 ) -> int:
     import rclpy
-    from diagnostic_msgs.msg import DiagnosticArray
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
     from rclpy.node import Node
     from sensor_msgs.msg import JointState
     from tqdm import tqdm
@@ -260,6 +264,8 @@ def _run(
                     data.compensator.append((now, values))
                     if status.message.startswith("trajectory refused"):
                         data.refusal = status.message
+                    elif status.level == DiagnosticStatus.ERROR and not data.stopped:
+                        data.stopped = status.message
                 elif status.name.endswith(("sim_hardware", "valve_driver")):
                     data.driver.append((now, values))
                 elif status.name.endswith("recorder"):
@@ -361,6 +367,8 @@ def _run(
                     file=sys.stderr,
                 )
                 return EXIT_REFUSED
+            if data.stopped:
+                break
             if started_at is None and now - sent_at > _START_TIMEOUT_S:
                 bar.close()
                 print(
@@ -370,6 +378,8 @@ def _run(
                 )
                 return EXIT_GRAPH
         bar.close()
+        if data.stopped:
+            print(f"follow_trajectory: compensator: {data.stopped}", file=sys.stderr)
         # One more report from each node after the run, so its counters span all of it.
         end_s = time.monotonic()
         until = end_s + 2.5
@@ -393,7 +403,7 @@ def _run(
         )
     except TrackingError as exc:
         print(f"follow_trajectory: cannot score the run: {exc}", file=sys.stderr)
-        return EXIT_GRAPH
+        return EXIT_STOPPED if data.stopped else EXIT_GRAPH
     print(result.text(plan.name))
     # Reports from the last one before the first set-point to the first after the end (the
     # loop above only ends with set-points received, so started_at is set).
@@ -412,6 +422,8 @@ def _run(
         {
             "trajectory": plan.name,
             "bag": str(bag_path or ""),
+            # Why the compensator stopped part-way ('' if the run went to its end).
+            "stopped": data.stopped,
             "lead_in_s": lead_s,
             "timing": timing,
             # The compensator's 1 Hz reports over the run: where in it deadlines were missed.
@@ -436,6 +448,12 @@ def _run(
     )
     print(f"Plot: {plot}")
     print(f"Report: {run_dir / 'report.json'}")
+    if data.stopped:
+        print(
+            f"follow_trajectory: the run stopped part-way: {data.stopped} (scored up to there)",
+            file=sys.stderr,
+        )
+        return EXIT_STOPPED
     return 0
 
 
