@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
+import os
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from fault_log import FaultRecord, write_report
 from graph_utils import Children, ros_env, unique_domain_id
+
+_FAULTS: list[FaultRecord] = []
 
 
 @pytest.hookimpl(wrapper=True, tryfirst=True)
@@ -29,3 +34,32 @@ def children(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Childre
         report = getattr(request.node, "report_call", None)
         if report is not None and report.failed:
             print(f"ROS_DOMAIN_ID={kids.domain_id}\n{kids.all_logs()}")
+
+
+@pytest.fixture
+def fault(request: pytest.FixtureRequest) -> Iterator[FaultRecord]:
+    """The fault this test injects (from its ``fault`` marker), recorded for the table."""
+    marker = request.node.get_closest_marker("fault")
+    if marker is None:
+        raise pytest.UsageError(f"{request.node.nodeid} takes `fault` but has no fault marker")
+    record = FaultRecord(
+        test=request.node.nodeid,
+        fault=str(marker.args[0]),
+        safe=str(marker.kwargs.get("safe", "")),
+        category=str(marker.kwargs.get("category", "graph")),
+    )
+    start = time.monotonic()
+    try:
+        yield record
+    finally:
+        record.duration_s = time.monotonic() - start
+        report = getattr(request.node, "report_call", None)
+        record.outcome = "not run" if report is None else report.outcome
+        _FAULTS.append(record)
+
+
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    """With FAULT_REPORT set, write the rows of every fault test that ran."""
+    path = os.environ.get("FAULT_REPORT")
+    if path and _FAULTS:
+        write_report(_FAULTS, Path(path))

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
+from fault_log import FaultRecord
 from graph_utils import Children, Probe, node_argv, recorder_values, wait_for_recorder
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
@@ -47,7 +48,13 @@ def _count(values: dict[str, str], topic: str) -> int:
     return int(values.get(f"count {topic}", "0"))
 
 
-def test_killed_recorder_leaves_repairable_bag(children: Children, tmp_path: Path) -> None:
+@pytest.mark.fault(
+    "kill -9 recorder mid-recording",
+    safe="the bag is refused with a repair hint; bag repair recovers it",
+)
+def test_killed_recorder_leaves_repairable_bag(
+    children: Children, tmp_path: Path, fault: FaultRecord
+) -> None:
     bag = tmp_path / "bag"
     specs = sim_graph_specs(bag, {"source": "test_recorder_kill"}, with_compensator=False)
     specs[0].params["flush_period_s"] = FLUSH_PERIOD_S
@@ -80,7 +87,7 @@ def test_killed_recorder_leaves_repairable_bag(children: Children, tmp_path: Pat
 
     with pytest.raises(TruncatedBagError) as refused:
         load_bag(bag)
-    assert "catheter-lab bag repair" in str(refused.value), str(refused.value)
+    fault.check("reported", "catheter-lab bag repair" in str(refused.value), str(refused.value))
 
     catheter_lab = Path(sys.executable).with_name("catheter-lab")
     repair = subprocess.run(
@@ -126,5 +133,9 @@ def test_killed_recorder_leaves_repairable_bag(children: Children, tmp_path: Pat
         f"recorded {recorded_s:.2f} s; recovered {dict(rosbags_counts)}; expected >= "
         f"{expected:.0f}; recorder's last report {_count(last_report, ANGLE)}"
     )
-    assert rosbags_counts[ANGLE] >= expected, (rosbags_counts, recorded_s, repair.stdout)
+    fault.check(
+        "bag data up to the last flush (0.5 s before the kill) recovered by bag repair",
+        rosbags_counts[ANGLE] >= expected,
+        f"{rosbags_counts[ANGLE]} tip/angle recovered, expected >= {expected:.0f}",
+    )
     assert rosbags_counts[ANGLE] <= RATE_HZ * recorded_s + 1
