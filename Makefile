@@ -5,8 +5,8 @@ BIN := $(VENV)/bin
 PY := $(BIN)/python
 PRESET ?= traj_descending_sine
 
-.PHONY: setup demo test test-fast test-slow lint typecheck bench bench-models lab-example figures sample-bags \
-	shipped-models colcon clean
+.PHONY: setup demo test test-fast test-slow lint typecheck bench bench-models soak faults lab-example figures \
+	sample-bags shipped-models colcon clean
 
 setup: $(VENV)/.installed
 
@@ -44,6 +44,18 @@ bench: setup
 	$(PY) bench/bench_clstm_step.py
 	$(PY) bench/bench_graph_timing.py
 	$(PY) bench/bench_lab.py
+
+## Soak: the whole simulated graph at 1 kHz for 10 minutes with the recorder on; missed
+## deadlines per minute, RSS per process and dropped messages in the bag (about 11 minutes;
+## run it alone). Results: bench/results/soak.json and soak.png.
+soak: setup
+	$(PY) bench/bench_soak.py
+
+## Fault-injection suite (tests marked `fault`, about 3 minutes): every fault, its invariants
+## and its time to a safe state, written into docs/reliability.md's table.
+faults: setup
+	FAULT_REPORT=bench/results/faults.json $(BIN)/pytest -m fault tests/integration
+	$(PY) scripts/fault_table.py bench/results/faults.json --docs docs/reliability.md
 
 ## The lab's worked example (docs/lab.md): hidden pneumatic lag, diagnose, add, history.
 lab-example: setup
