@@ -1,11 +1,16 @@
 """``colcon build`` of a scratch copy of ros2_ws installs what ``ros2 run`` needs: every console
-script under ``lib/<package>/``, the ament index entries, and a working installed entry point."""
+script under ``lib/<package>/``, the ament index entries, and a working installed entry point;
+and what ``ros2 launch`` needs: the launch files and the drivers' parameter files under
+``share/``. No launch package is installed here, so the launch files are compiled and read, not
+run: each defines ``generate_launch_description``, and every node and parameter file it names
+is installed."""
 
 from __future__ import annotations
 
 import ast
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -84,6 +89,8 @@ def test_colcon_build_installs_every_executable(tmp_path: Path) -> None:
             assert exe.is_file(), f"{pkg}: {name} not installed in {lib}: {sorted(lib.iterdir())}"
             assert os.access(exe, os.X_OK), f"{exe} is not executable"
 
+    _check_launch_files(ws, install)
+
     # What `ros2 run` does: find each package through the ament index.
     site_packages = _site_packages(install)
     run_env = {
@@ -131,3 +138,41 @@ def test_colcon_build_installs_every_executable(tmp_path: Path) -> None:
     )
     assert effects.returncode == 0, f"{effects.stdout}\n{effects.stderr}"
     assert "pneumatic_lag" in effects.stdout, effects.stdout
+
+
+def _check_launch_files(ws: Path, install: Path) -> None:
+    """Launch files and parameter files are installed, compile, and name installed things."""
+    config_src = sorted((ws / "src" / "catheter_driver" / "config").glob("*.yaml"))
+    assert config_src, "catheter_driver has no config/*.yaml"
+    config_share = install / "catheter_driver" / "share" / "catheter_driver" / "config"
+    for src in config_src:
+        installed = config_share / src.name
+        assert installed.is_file(), f"{src.name} not installed in {config_share}"
+        assert installed.read_bytes() == src.read_bytes()
+
+    launch_src = sorted((ws / "src" / "catheter_control" / "launch").glob("*.launch.py"))
+    assert {p.name for p in launch_src} >= {"sim.launch.py", "rig.launch.py"}, launch_src
+    launch_share = install / "catheter_control" / "share" / "catheter_control" / "launch"
+    for src in launch_src:
+        installed = launch_share / src.name
+        assert installed.is_file(), f"{src.name} not installed in {launch_share}"
+        source = installed.read_text()
+        compile(source, str(installed), "exec")  # a SyntaxError fails the test
+        tree = ast.parse(source)
+        assert any(
+            isinstance(node, ast.FunctionDef) and node.name == "generate_launch_description"
+            for node in tree.body
+        ), f"{src.name} defines no generate_launch_description()"
+        nodes = [
+            {kw.arg: kw.value for kw in call.keywords}
+            for call in ast.walk(tree)
+            if isinstance(call, ast.Call) and getattr(call.func, "id", "") == "Node"
+        ]
+        assert nodes, f"{src.name} starts no Node"
+        for kwargs in nodes:
+            package = ast.literal_eval(kwargs["package"])
+            executable = ast.literal_eval(kwargs["executable"])
+            exe = install / package / "lib" / package / executable
+            assert exe.is_file(), f"{src.name}: Node({package}, {executable}): no {exe}"
+        for name in re.findall(r"\"(\w+\.yaml)\"", source):
+            assert (config_share / name).is_file(), f"{src.name} names {name}, not installed"

@@ -1,5 +1,7 @@
 """ament_python packaging for catheter_control; also installs with plain pip."""
 
+from pathlib import Path
+
 from setuptools import find_packages, setup
 
 PACKAGE = "catheter_control"
@@ -15,6 +17,11 @@ setup(
         # ament_index_python look for; colcon installs them under share/.
         ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
         ("share/" + PACKAGE, ["package.xml"]),
+        # `ros2 launch catheter_control sim.launch.py` (and rig.launch.py) look here.
+        (
+            "share/" + PACKAGE + "/launch",
+            [str(p) for p in sorted(Path("launch").glob("*.launch.py"))],
+        ),
     ],
     install_requires=["setuptools"],
     zip_safe=False,

@@ -1,0 +1,158 @@
+"""The real rig: ``valve_driver``, ``laser_angle``, ``compensator`` and ``recorder``.
+
+    ros2 launch catheter_control rig.launch.py
+    ros2 launch catheter_control rig.launch.py \
+        valve_config:=$(ros2 pkg prefix --share catheter_driver)/config/valve_driver_dac_serial.yaml
+
+The drivers read their device settings from the parameter files installed with
+catheter_driver (``share/catheter_driver/config``, one per backend; docs/rig.md). Those files
+are keyed by node name with the ``/catheter`` namespace (``/catheter/valve_driver:``): with
+another ``namespace``, pass files keyed for it, or the drivers start with their defaults and
+no device. Both drivers are lifecycle nodes that configure and activate themselves
+(``autostart``). Zero the laser before the first run (docs/rig.md).
+
+On Ctrl-C, launch signals every node at once; the valve driver vents on shutdown and by its
+watchdog whatever the order.
+"""
+
+import time
+from pathlib import Path
+
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument
+from launch.conditions import IfCondition
+from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
+from launch_ros.actions import Node
+from launch_ros.parameter_descriptions import ParameterValue
+from launch_ros.substitutions import FindPackageShare
+
+
+def generate_launch_description() -> LaunchDescription:
+    """Arguments, then the recorder, the two drivers and the compensator, in start order."""
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    default_bag = str(Path.cwd() / "runs" / f"{stamp}-rig" / "bag")
+    config = PathJoinSubstitution([FindPackageShare("catheter_driver"), "config"])
+    namespace = LaunchConfiguration("namespace")
+    rt_priority = ParameterValue(LaunchConfiguration("rt_priority"), value_type=int)
+    arguments = [
+        DeclareLaunchArgument(
+            "namespace",
+            default_value="catheter",
+            description="namespace of every node (the shipped driver configs are keyed for "
+            "catheter)",
+        ),
+        DeclareLaunchArgument(
+            "valve_config",
+            default_value=PathJoinSubstitution([config, "valve_driver_canopen.yaml"]),
+            description="valve_driver parameter file (valve_driver_canopen.yaml or "
+            "valve_driver_dac_serial.yaml in share/catheter_driver/config, or your own)",
+        ),
+        DeclareLaunchArgument(
+            "laser_config",
+            default_value=PathJoinSubstitution([config, "laser_angle_adc_serial.yaml"]),
+            description="laser_angle parameter file (laser_angle_adc_serial.yaml or "
+            "laser_angle_adc_can.yaml in share/catheter_driver/config, or your own)",
+        ),
+        DeclareLaunchArgument(
+            "compensator",
+            default_value="clstm",
+            choices=["clstm", "idrdpi", "none"],
+            description="feedforward compensator (none: static inverse, no hysteresis model)",
+        ),
+        DeclareLaunchArgument(
+            "model_dir",
+            default_value="",
+            description="model directory for the compensator ('' = the shipped one, fitted "
+            "on the simulated rig); hash-checked on load",
+        ),
+        DeclareLaunchArgument(
+            "control_rate_hz", default_value="250.0", description="control loop rate [Hz]"
+        ),
+        DeclareLaunchArgument(
+            "require_tip_angle",
+            default_value="false",
+            choices=["true", "false"],
+            description="compensator stops when the laser's tip/angle goes stale",
+        ),
+        DeclareLaunchArgument(
+            "accept_trajectories",
+            default_value="true",
+            choices=["true", "false"],
+            description="false: the compensator does not subscribe to trajectory, so nothing "
+            "on the network can make it move the catheter",
+        ),
+        DeclareLaunchArgument(
+            "rt_priority",
+            default_value="50",
+            description="SCHED_FIFO priority of the loops (0: normal scheduling)",
+        ),
+        DeclareLaunchArgument(
+            "record", default_value="true", choices=["true", "false"], description="run recorder"
+        ),
+        DeclareLaunchArgument(
+            "bag_path",
+            default_value=default_bag,
+            description="new bag directory (must not exist)",
+        ),
+    ]
+    recorder = Node(
+        package="catheter_control",
+        executable="recorder",
+        namespace=namespace,
+        condition=IfCondition(LaunchConfiguration("record")),
+        parameters=[
+            {
+                "bag_path": ParameterValue(LaunchConfiguration("bag_path"), value_type=str),
+                # A JSON object as a string parameter: typed, or launch would parse it as YAML.
+                "custom_data": ParameterValue(
+                    [
+                        '{"source": "rig.launch.py", "hardware": "rig (valve_driver, '
+                        'laser_angle)", "compensator": "',
+                        LaunchConfiguration("compensator"),
+                        '", "model_dir": "',
+                        LaunchConfiguration("model_dir"),
+                        '"}',
+                    ],
+                    value_type=str,
+                ),
+            }
+        ],
+        output="screen",
+    )
+    valve_driver = Node(
+        package="catheter_driver",
+        executable="valve_driver",
+        namespace=namespace,
+        parameters=[LaunchConfiguration("valve_config"), {"rt_priority": rt_priority}],
+        output="screen",
+    )
+    laser_angle = Node(
+        package="catheter_driver",
+        executable="laser_angle",
+        namespace=namespace,
+        parameters=[LaunchConfiguration("laser_config"), {"rt_priority": rt_priority}],
+        output="screen",
+    )
+    compensator = Node(
+        package="catheter_control",
+        executable="compensator",
+        namespace=namespace,
+        parameters=[
+            {
+                "compensator": ParameterValue(LaunchConfiguration("compensator"), value_type=str),
+                "model_dir": ParameterValue(LaunchConfiguration("model_dir"), value_type=str),
+                "control_rate_hz": ParameterValue(
+                    LaunchConfiguration("control_rate_hz"), value_type=float
+                ),
+                "require_tip_angle": ParameterValue(
+                    LaunchConfiguration("require_tip_angle"), value_type=bool
+                ),
+                "accept_trajectories": ParameterValue(
+                    LaunchConfiguration("accept_trajectories"), value_type=bool
+                ),
+                "rt_priority": rt_priority,
+            }
+        ],
+        output="screen",
+    )
+    return LaunchDescription([*arguments, recorder, valve_driver, laser_angle, compensator])

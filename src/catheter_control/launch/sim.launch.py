@@ -1,0 +1,134 @@
+"""The simulated graph: ``sim_hardware``, ``compensator`` and ``recorder`` in one namespace.
+
+    ros2 launch catheter_control sim.launch.py
+    ros2 launch catheter_control sim.launch.py compensator:=idrdpi control_rate_hz:=1000.0
+    ros2 launch catheter_control sim.launch.py record:=false namespace:=catheter2
+
+Then, from another shell on the same ROS_DOMAIN_ID, send a trajectory to the running graph
+(without ``--sim``, ``follow_trajectory`` starts nothing and uses the nodes that are up):
+
+    ros2 run catheter_control follow_trajectory --preset traj_up_chirp
+
+The same graph as ``bringup --bag PATH`` (catheter_control/bringup.py), which needs no launch
+package. One difference: on Ctrl-C, launch signals every node at once, where ``bringup`` stops
+the compensator first and the recorder last. The safety does not depend on it (the simulated
+driver vents by its own watchdog), but the bag may miss the last vent.
+"""
+
+import time
+from pathlib import Path
+
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument
+from launch.conditions import IfCondition
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+from launch_ros.parameter_descriptions import ParameterValue
+
+
+def generate_launch_description() -> LaunchDescription:
+    """Arguments, then the recorder, the simulated rig and the compensator, in start order."""
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    default_bag = str(Path.cwd() / "runs" / f"{stamp}-sim" / "bag")
+    namespace = LaunchConfiguration("namespace")
+    rt_priority = ParameterValue(LaunchConfiguration("rt_priority"), value_type=int)
+    arguments = [
+        DeclareLaunchArgument(
+            "namespace", default_value="catheter", description="namespace of every node"
+        ),
+        DeclareLaunchArgument(
+            "compensator",
+            default_value="clstm",
+            choices=["clstm", "idrdpi", "none"],
+            description="feedforward compensator (none: static inverse, no hysteresis model)",
+        ),
+        DeclareLaunchArgument(
+            "model_dir",
+            default_value="",
+            description="model directory for the compensator ('' = the shipped one); "
+            "hash-checked on load",
+        ),
+        DeclareLaunchArgument(
+            "control_rate_hz", default_value="250.0", description="control loop rate [Hz]"
+        ),
+        DeclareLaunchArgument(
+            "require_tip_angle",
+            default_value="true",
+            choices=["true", "false"],
+            description="compensator stops when tip/angle goes stale (the simulated rig has a "
+            "laser)",
+        ),
+        DeclareLaunchArgument(
+            "accept_trajectories",
+            default_value="true",
+            choices=["true", "false"],
+            description="false: the compensator does not subscribe to trajectory",
+        ),
+        DeclareLaunchArgument(
+            "rt_priority",
+            default_value="50",
+            description="SCHED_FIFO priority of the loops (0: normal scheduling)",
+        ),
+        DeclareLaunchArgument(
+            "record", default_value="true", choices=["true", "false"], description="run recorder"
+        ),
+        DeclareLaunchArgument(
+            "bag_path",
+            default_value=default_bag,
+            description="new bag directory (must not exist)",
+        ),
+    ]
+    recorder = Node(
+        package="catheter_control",
+        executable="recorder",
+        namespace=namespace,
+        condition=IfCondition(LaunchConfiguration("record")),
+        parameters=[
+            {
+                "bag_path": ParameterValue(LaunchConfiguration("bag_path"), value_type=str),
+                # A JSON object as a string parameter: typed, or launch would parse it as YAML.
+                "custom_data": ParameterValue(
+                    [
+                        '{"source": "sim.launch.py", "hardware": "simulated thesis rig '
+                        '(catheter_driver sim_hardware)", "compensator": "',
+                        LaunchConfiguration("compensator"),
+                        '", "model_dir": "',
+                        LaunchConfiguration("model_dir"),
+                        '"}',
+                    ],
+                    value_type=str,
+                ),
+            }
+        ],
+        output="screen",
+    )
+    sim_hardware = Node(
+        package="catheter_driver",
+        executable="sim_hardware",
+        namespace=namespace,
+        parameters=[{"rt_priority": rt_priority}],
+        output="screen",
+    )
+    compensator = Node(
+        package="catheter_control",
+        executable="compensator",
+        namespace=namespace,
+        parameters=[
+            {
+                "compensator": ParameterValue(LaunchConfiguration("compensator"), value_type=str),
+                "model_dir": ParameterValue(LaunchConfiguration("model_dir"), value_type=str),
+                "control_rate_hz": ParameterValue(
+                    LaunchConfiguration("control_rate_hz"), value_type=float
+                ),
+                "require_tip_angle": ParameterValue(
+                    LaunchConfiguration("require_tip_angle"), value_type=bool
+                ),
+                "accept_trajectories": ParameterValue(
+                    LaunchConfiguration("accept_trajectories"), value_type=bool
+                ),
+                "rt_priority": rt_priority,
+            }
+        ],
+        output="screen",
+    )
+    return LaunchDescription([*arguments, recorder, sim_hardware, compensator])
