@@ -140,3 +140,37 @@ def test_a_model_file_that_lists_an_effect_without_parameters_asks_for_a_refit(
     # The file's hash no longer matches: refused, never silently run without the block.
     with pytest.raises((ModelError, ModelDirError), match=r"greybox\.json"):
         load_model(out)
+
+
+# Off-grid values (a delay of 37.3 samples, a tip between sub-steps): the stream must match.
+STREAM_VALUES = {
+    "transport_delay": [0.1491],
+    "pneumatic_lag": [0.08],
+    "creep": [0.3, 1.2],
+    "tip_dynamics": [6.3, 0.07, 2.0],
+    "drift": [math.radians(5.0) / 60.0],
+}
+
+
+@pytest.mark.parametrize("effect", list(BLOCKS))
+def test_each_block_streams_what_it_applies(effect: str) -> None:
+    rng = np.random.default_rng(3)
+    x = np.cumsum(rng.normal(0.0, 0.3, 1500)) + 5.0  # a rough signal that starts off rest
+    values = STREAM_VALUES[effect]
+    step_fn = block(effect).streamer(RATE_HZ, values)
+    streamed = np.array([step_fn(v) for v in x])
+    np.testing.assert_allclose(streamed, block(effect).apply(x, RATE_HZ, values), atol=1e-9)
+
+
+def test_a_greybox_with_every_block_streams_its_prediction(drdpi_and_data) -> None:
+    drdpi, recs = drdpi_and_data
+    base = GreyBox.from_drdpi(drdpi)
+    model = GreyBox(effects=list(BLOCKS), n_play=base.n_play, n_deadband=base.n_deadband)
+    model._set(base.core_, STREAM_VALUES, base.rate_hz_)  # every block, at off-grid values
+    pressure_pa = recs[1].pressure_pa[:1500]
+    stream = model.stream()
+    streamed = np.array([stream.step(p) for p in pressure_pa])
+    np.testing.assert_allclose(streamed, model.predict(pressure_pa), rtol=0, atol=1e-12)
+    stream.reset()
+    again = np.array([stream.step(p) for p in pressure_pa[:100]])
+    np.testing.assert_array_equal(again, streamed[:100])

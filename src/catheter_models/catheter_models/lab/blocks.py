@@ -16,7 +16,8 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Mapping, Sequence
+from collections import deque
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import ClassVar, Final, Literal
 
@@ -29,6 +30,8 @@ from catheter_models.errors import ParameterError
 
 FloatArray = npt.NDArray[np.float64]
 Side = Literal["input", "output"]
+Step = Callable[[float], float]
+"""One sample in, one out: a block streamed (:meth:`Block.streamer`)."""
 
 DEFAULT_CHAIN_EFFECTS: Final = ("play", "rate_dependence", "deadband", "asymmetry", "saturation")
 """The effects the thesis's DRDPI already carries (the default chain)."""
@@ -68,6 +71,10 @@ class Block(ABC):
     def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:
         """The block's output for input ``x`` sampled at ``rate_hz`` with ``values``."""
 
+    @abstractmethod
+    def streamer(self, rate_hz: float, values: Sequence[float]) -> Step:
+        """``apply`` one sample at a time, from rest: ``step(x) -> y``, equal to ``apply``."""
+
     def excitation_problem(self, inputs: Sequence[FloatArray], rate_hz: float) -> str:
         """Why ``inputs`` (pressure, bar) cannot identify this block ('' if they can)."""
         return ""
@@ -104,6 +111,18 @@ def _lowpass1(x: FloatArray, rate_hz: float, time_constant_s: float) -> FloatArr
     return out
 
 
+class _Lowpass1Stream:
+    """:func:`_lowpass1` one sample at a time (the first sample is the rest it starts from)."""
+
+    def __init__(self, rate_hz: float, time_constant_s: float) -> None:
+        self.a = math.exp(-1.0 / (rate_hz * time_constant_s))
+        self.y: float | None = None
+
+    def step(self, x: float) -> float:
+        self.y = x if self.y is None else self.a * self.y + (1.0 - self.a) * x
+        return self.y
+
+
 def _band_power_fraction(inputs: Sequence[FloatArray], rate_hz: float, above_hz: float) -> float:
     """Share of the inputs' rate-signal power above ``above_hz`` (what fast effects need)."""
     total = high = 0.0
@@ -135,6 +154,10 @@ class PneumaticLag(Block):
         """The muscle's pressure [bar]: the valve's through a first-order lag."""
         return _lowpass1(x, rate_hz, values[0])
 
+    def streamer(self, rate_hz: float, values: Sequence[float]) -> Step:
+        """The lag, one sample at a time."""
+        return _Lowpass1Stream(rate_hz, values[0]).step
+
 
 class TransportDelay(Block):
     """Valve dead time and pressure-wave travel as a pure delay (linear interpolation)."""
@@ -150,6 +173,30 @@ class TransportDelay(Block):
         t = np.arange(x.size) / rate_hz
         out: FloatArray = np.interp(t - values[0], t, x, left=x[0])
         return out
+
+    def streamer(self, rate_hz: float, values: Sequence[float]) -> Step:
+        """The delay, one sample at a time: the first sample and the last ``delay_s`` kept."""
+        lag = values[0] * rate_hz  # in samples, fractional
+        recent: deque[float] = deque(maxlen=math.ceil(lag) + 2)
+        first: list[float] = []
+        count = [0]
+
+        def step(x: float) -> float:
+            i = count[0]
+            count[0] += 1
+            recent.append(x)
+            if not first:
+                first.append(x)
+            position = i - lag
+            if position <= 0.0:
+                return first[0]  # before the recording began: its first sample
+            lo = math.floor(position)
+            frac = position - lo
+            oldest = i - len(recent) + 1  # sample index of recent[0]
+            y = recent[lo - oldest]
+            return y if frac == 0.0 else (1.0 - frac) * y + frac * recent[lo + 1 - oldest]
+
+        return step
 
 
 class Creep(Block):
@@ -172,6 +219,12 @@ class Creep(Block):
         out: FloatArray = (1.0 - fraction) * x + fraction * _lowpass1(x, rate_hz, tau)
         return out
 
+    def streamer(self, rate_hz: float, values: Sequence[float]) -> Step:
+        """Creep, one sample at a time."""
+        fraction, tau = values
+        lag = _Lowpass1Stream(rate_hz, tau).step
+        return lambda x: (1.0 - fraction) * x + fraction * lag(x)
+
     def excitation_problem(self, inputs: Sequence[FloatArray], rate_hz: float) -> str:
         """Creep shows only where the pressure holds still after a change."""
         # A plateau: the pressure holds within 2 % of full scale for 1 s after moving.
@@ -188,16 +241,24 @@ class Creep(Block):
 
 @njit(cache=True)
 def _tip_response(  # noqa: PLR0917 - numba compiles positional scalars only
-    x: FloatArray, dt_s: float, omega: float, zeta0: float, growth_per_deg: float, n_sub: int
+    x: FloatArray,
+    dt_s: float,
+    omega: float,
+    zeta0: float,
+    growth_per_deg: float,
+    n_sub: int,
+    state: FloatArray,
 ) -> FloatArray:  # pragma: no cover - compiled; exercised through TipDynamics.apply
     """The tip's bend [deg] pulled towards ``x`` through a mass-spring whose damping grows.
 
-    Semi-implicit Euler with the damping implicit: stable for any damping, and accurate while
-    ``omega * dt_s / n_sub`` stays small (<= 0.25 at 40 Hz with 1 ms sub-steps).
+    ``state`` is (bend [deg], rate [deg/s]), read at the start and left at the end, so a
+    stream calls this one sample at a time. Semi-implicit Euler with the damping implicit:
+    stable for any damping, and accurate while ``omega * dt_s / n_sub`` stays small (<= 0.25
+    at 40 Hz with 1 ms sub-steps).
     """
     h = dt_s / n_sub
-    y = x[0]
-    v = 0.0
+    y = state[0]
+    v = state[1]
     out = np.empty_like(x)
     for i in range(x.size):
         # The bend at the sample instant, then the input held over the sample (zero-order
@@ -207,6 +268,8 @@ def _tip_response(  # noqa: PLR0917 - numba compiles positional scalars only
         for _ in range(n_sub):
             v = (v + h * omega * omega * (x[i] - y)) / (1.0 + 2.0 * zeta * omega * h)
             y += h * v
+    state[0] = y
+    state[1] = v
     return out
 
 
@@ -242,17 +305,34 @@ class TipDynamics(Block):
 
     def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:
         """The bend [deg] through the tip's mass-spring, sub-stepped at 1 ms or finer."""
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        state = np.array([x[0], 0.0])  # at rest on the first sample
+        out: FloatArray = _tip_response(x, *self._settings(rate_hz, values), state)
+        return out
+
+    def streamer(self, rate_hz: float, values: Sequence[float]) -> Step:
+        """The tip, one sample at a time (the same compiled kernel, state carried)."""
+        settings = self._settings(rate_hz, values)
+        state = np.zeros(2)
+        started = [False]
+        sample = np.zeros(1)
+
+        def step(x: float) -> float:
+            if not started[0]:
+                state[0], started[0] = x, True
+            sample[0] = x
+            return float(_tip_response(sample, *settings, state)[0])
+
+        return step
+
+    @staticmethod
+    def _settings(
+        rate_hz: float, values: Sequence[float]
+    ) -> tuple[float, float, float, float, int]:
+        """(dt, omega, zeta0, growth per degree, sub-steps): sub-steps of 1 ms or finer."""
         f_hz, zeta0, growth_per_rad = values
         n_sub = max(1, math.ceil(1000.0 / rate_hz))
-        out: FloatArray = _tip_response(
-            np.ascontiguousarray(x, dtype=np.float64),
-            1.0 / rate_hz,
-            2.0 * math.pi * f_hz,
-            zeta0,
-            growth_per_rad * math.pi / 180.0,
-            n_sub,
-        )
-        return out
+        return 1.0 / rate_hz, 2.0 * math.pi * f_hz, zeta0, growth_per_rad * math.pi / 180.0, n_sub
 
     def excitation_problem(self, inputs: Sequence[FloatArray], rate_hz: float) -> str:
         """Tip dynamics show only where the pressure moves faster than about 1 Hz."""
@@ -290,6 +370,18 @@ class Drift(Block):
         # Internal output unit is degrees: the rate is stored in rad/s.
         out: FloatArray = x + math.degrees(values[0]) * np.arange(x.size) / rate_hz
         return out
+
+    def streamer(self, rate_hz: float, values: Sequence[float]) -> Step:
+        """The trend, one sample at a time (counted from the first)."""
+        deg_per_sample = math.degrees(values[0]) / rate_hz
+        count = [0]
+
+        def step(x: float) -> float:
+            k = count[0]
+            count[0] += 1
+            return x + deg_per_sample * k
+
+        return step
 
     def excitation_problem(self, inputs: Sequence[FloatArray], rate_hz: float) -> str:
         """A trend needs time to tell apart from the hysteresis."""

@@ -203,7 +203,7 @@ class GreyBox(Model):
         return out
 
     def stream(self) -> _GreyBoxStream:
-        """Sample by sample, equal to :meth:`predict`: reruns the chain on all input since reset."""
+        """Sample by sample, equal to :meth:`predict` (each block streams its own state)."""
         self._fitted()
         return _GreyBoxStream(self)
 
@@ -386,19 +386,36 @@ class GreyBox(Model):
 
 
 class _GreyBoxStream:
-    """Sample-by-sample grey box: the chain rerun on the recent window at each step.
-
-    The lab uses :meth:`GreyBox.predict`; this exists so that every model kind streams. It
-    keeps the whole input since reset (a lab tool, not the compensator's hot path).
-    """
+    """Sample-by-sample grey box: each block and the DRDPI core carry their own state."""
 
     def __init__(self, model: GreyBox) -> None:
         self._model = model
-        self._x: list[float] = []
+        self.reset()
 
     def reset(self) -> None:
-        self._x = []
+        m = self._model
+        rate = m.rate_hz_
+        self._inputs = [
+            m._blocks[e].streamer(rate, m.blocks_[e])
+            for e in m.effects
+            if BLOCKS[e].side == "input"
+        ]
+        self._outputs = [
+            m._blocks[e].streamer(rate, m.blocks_[e])
+            for e in m.effects
+            if BLOCKS[e].side == "output"
+        ]
+        self._state = np.zeros(op.chain_state_size(m._coef))
+        self._x = np.zeros(1)
+        self._y = np.zeros(1)
 
     def step(self, value: float) -> float:
-        self._x.append(check_finite_step(value, "greybox"))
-        return float(self._model.predict(np.asarray(self._x))[-1])
+        x = pa_to_bar(check_finite_step(value, "greybox"))
+        for block_step in self._inputs:
+            x = block_step(x)
+        self._x[0] = x
+        op.chain_run(self._x, self._model._coef, self._state, self._y)
+        y = float(self._y[0])
+        for block_step in self._outputs:
+            y = block_step(y)
+        return float(deg_to_rad(y))
