@@ -47,9 +47,10 @@ bench: setup
 
 ## Soak: the whole simulated graph at 1 kHz for 10 minutes with the recorder on; missed
 ## deadlines per minute, RSS per process and dropped messages in the bag (about 11 minutes;
-## run it alone). Results: bench/results/soak.json and soak.png.
+## run it alone). Results: bench/results/soak.json and soak.png, and docs/reliability.md.
 soak: setup
 	$(PY) bench/bench_soak.py
+	$(PY) scripts/soak_section.py bench/results/soak.json --docs docs/reliability.md
 
 ## Fault-injection suite (tests marked `fault`, about 3 minutes): every fault, its invariants
 ## and its time to a safe state, written into docs/reliability.md's table.

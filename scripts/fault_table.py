@@ -17,6 +17,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from doc_markers import write_between
+
 BEGIN, END = "<!-- faults:begin -->", "<!-- faults:end -->"
 CATEGORIES = {
     "graph": "Simulated graph (separate processes over DDS)",
@@ -64,16 +66,6 @@ def table(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines).rstrip() + "\n"
 
 
-def write_into(doc: Path, text: str) -> None:
-    """Replace what lies between the markers in ``doc`` with ``text``."""
-    content = doc.read_text()
-    if BEGIN not in content or END not in content:
-        raise SystemExit(f"fault_table: {doc} has no {BEGIN} ... {END} markers")
-    head, rest = content.split(BEGIN, 1)
-    _, tail = rest.split(END, 1)
-    doc.write_text(f"{head}{BEGIN}\n{text}{END}{tail}")
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("report", type=Path, help="JSON written by the suite (FAULT_REPORT)")
@@ -86,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
     text = table(rows)
     print(text)
     if args.docs:
-        write_into(args.docs, text)
+        write_between(args.docs, BEGIN, END, text)
         print(f"written into {args.docs}")
     return 0 if all(r["outcome"] == "passed" for r in rows) else 1
 
