@@ -18,11 +18,23 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from catheter_control.bringup import NodeSpec, ProcessGraph
 from catheter_models.contract import DEFAULT_NAMESPACE
+from catheter_models.units import AMBIENT_PRESSURE_PA
 
 DOMAIN_LOW, DOMAIN_HIGH = 100, 230
 _domain_counter = itertools.count()
+
+
+COMPENSATOR = "catheter/compensator"
+SIM = "catheter/sim_hardware"
+"""/diagnostics status names of the compensator and the simulated rig."""
+MAX_PRESSURE_PA = 3.0e5
+"""The command range's top (compensator and drivers), gauge."""
+NOISE_MARGIN_PA = 2000.0
+"""Pressure transmitter noise is 300 Pa std (rig.pressure_noise_pa): 2000 Pa is > 6 sigma."""
 
 
 def unique_domain_id() -> int:
@@ -291,3 +303,8 @@ def trajectory_msg(points: Sequence[tuple[float, float]]) -> Any:
         point.time_from_start = Duration(sec=int(t), nanosec=round((t - int(t)) * 1e9))
         msg.points.append(point)
     return msg
+
+
+def gauge_pa(stamped: Sequence[Stamped]) -> np.ndarray:
+    """Gauge pressure [Pa] of received FluidPressure messages (absolute on the wire)."""
+    return np.array([m.msg.fluid_pressure - AMBIENT_PRESSURE_PA for m in stamped])

@@ -14,10 +14,15 @@ import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from fault_log import FaultRecord
 from graph_utils import (
+    COMPENSATOR,
+    MAX_PRESSURE_PA,
+    NOISE_MARGIN_PA,
+    SIM,
     Children,
     Probe,
     Stamped,
     diagnostic_values,
+    gauge_pa,
     node_argv,
     statuses,
     trajectory_msg,
@@ -36,7 +41,6 @@ from catheter_models.contract import (
     TRAJECTORY,
 )
 from catheter_models.signals import TEST_TRAJECTORIES
-from catheter_models.units import AMBIENT_PRESSURE_PA
 
 pytestmark = [
     pytest.mark.slow,
@@ -44,11 +48,6 @@ pytestmark = [
     pytest.mark.filterwarnings("ignore:module 'sre_:DeprecationWarning"),
 ]
 
-COMPENSATOR = "catheter/compensator"
-SIM = "catheter/sim_hardware"
-MAX_PRESSURE_PA = 3.0e5
-# Pressure transmitter noise is 300 Pa std (rig.pressure_noise_pa): 2000 Pa is > 6 sigma.
-NOISE_MARGIN_PA = 2000.0
 RAW_ANGLE = "tip/angle_raw"
 
 # Tracking bounds [deg] for the shipped c-LSTM over DDS, per thesis trajectory. The benchmark
@@ -66,14 +65,10 @@ RMSE_BOUND_DEG = {
 }
 
 
-def _gauge(messages: list[Stamped]) -> np.ndarray:
-    return np.array([m.msg.fluid_pressure - AMBIENT_PRESSURE_PA for m in messages])
-
-
 def _assert_pressures_in_range(
     commands: list[Stamped], measured: list[Stamped], fault: FaultRecord | None = None
 ) -> None:
-    cmd, meas = _gauge(commands), _gauge(measured)
+    cmd, meas = gauge_pa(commands), gauge_pa(measured)
     assert meas.size > 0, "no pressure/measured at all"
     ok = (cmd.size == 0 or (cmd.min() >= -1e-6 and cmd.max() <= MAX_PRESSURE_PA + 1e-6)) and (
         meas.max() <= MAX_PRESSURE_PA + NOISE_MARGIN_PA
@@ -219,7 +214,7 @@ def test_tip_angle_stopping_ramps_the_pressure_down_and_says_why(
         )
         assert diagnostic_values(status)["state"] == "following", diagnostic_values(status)
         assert "finite" in diagnostic_values(status)["last_refusal"]
-        held = _gauge(commands[-25:])
+        held = gauge_pa(commands[-25:])
         assert held.min() > 1.0e5, held  # still holding 20 deg
 
         # The laser goes quiet.
@@ -240,7 +235,7 @@ def test_tip_angle_stopping_ramps_the_pressure_down_and_says_why(
         assert "(limit 100 ms); ramped down" in status.message, status.message
         probe.spin_for(1.0)
         after = [m for m in commands if m.mono_s > t_fault]
-        ramp = _gauge(after)
+        ramp = gauge_pa(after)
         # Ramped to zero at the slew limit (20 bar/s: <= 0.15 s from 3 bar, plus the 0.1 s
         # timeout), monotonically, then the compensator went quiet (the driver's watchdog
         # holds the valve vented).

@@ -29,10 +29,15 @@ import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from fault_log import FaultRecord
 from graph_utils import (
+    COMPENSATOR,
+    MAX_PRESSURE_PA,
+    NOISE_MARGIN_PA,
+    SIM,
     Children,
     Probe,
     Stamped,
     diagnostic_values,
+    gauge_pa,
     node_argv,
     statuses,
     trajectory_msg,
@@ -54,7 +59,6 @@ from catheter_models.contract import (
     TRAJECTORY,
     qualify,
 )
-from catheter_models.units import AMBIENT_PRESSURE_PA
 
 pytestmark = [
     pytest.mark.slow,
@@ -62,11 +66,6 @@ pytestmark = [
     pytest.mark.filterwarnings("ignore:module 'sre_:DeprecationWarning"),
 ]
 
-COMPENSATOR = "catheter/compensator"
-SIM = "catheter/sim_hardware"
-MAX_PRESSURE_PA = 3.0e5
-# Pressure transmitter noise is 300 Pa std (rig.pressure_noise_pa): 2000 Pa is > 6 sigma.
-NOISE_MARGIN_PA = 2000.0
 VENTED_PA = 0.1e5
 WATCHDOG_S = 0.1
 """sim_hardware's command_timeout_s and the compensator's sensor_timeout_s (defaults)."""
@@ -81,12 +80,8 @@ CATHETER_LAB = Path(sys.executable).with_name("catheter-lab")
 SAMPLE_BAG = Path(__file__).resolve().parents[2] / "bags/model_test_up_chirp"
 
 
-def _gauge(stamped: list[Stamped]) -> np.ndarray:
-    return np.array([m.msg.fluid_pressure - AMBIENT_PRESSURE_PA for m in stamped])
-
-
 def _check_range(fault: FaultRecord, commands: list[Stamped], measured: list[Stamped]) -> None:
-    cmd, meas = _gauge(commands), _gauge(measured)
+    cmd, meas = gauge_pa(commands), gauge_pa(measured)
     ok = (cmd.size == 0 or (cmd.min() >= -1e-6 and cmd.max() <= MAX_PRESSURE_PA + 1e-6)) and (
         meas.size == 0 or meas.max() <= MAX_PRESSURE_PA + NOISE_MARGIN_PA
     )
@@ -101,7 +96,7 @@ def _check_range(fault: FaultRecord, commands: list[Stamped], measured: list[Sta
 def _first_time(stamped: list[Stamped], after_s: float, test: Callable[[float], bool]) -> float:
     """Monotonic time of the first message after ``after_s`` from which on ``test`` holds."""
     after = [m for m in stamped if m.mono_s > after_s]
-    values = _gauge(after)
+    values = gauge_pa(after)
     for i in range(len(after)):
         if all(test(v) for v in values[i:]):
             return after[i].mono_s
@@ -152,7 +147,7 @@ class SimGraph:
             self.children.all_logs()
         )
         self.probe.spin_for(2.5)
-        assert _gauge(self.measured[-25:]).mean() > 1.5e5, "not bent to 20 deg before the fault"
+        assert gauge_pa(self.measured[-25:]).mean() > 1.5e5, "not bent to 20 deg before the fault"
 
     def status_after(
         self, node: str, n_diag: int, test: Callable[[DiagnosticStatus], bool], timeout_s: float
@@ -251,7 +246,7 @@ def test_killed_rig(sim: SimGraph, fault: FaultRecord) -> None:
         zero_s - t_kill <= bound_s,
         f"{zero_s - t_kill:.3f} s (bound {bound_s:.2f} s)",
     )
-    ramp = _gauge([m for m in sim.commands if m.mono_s > t_kill])
+    ramp = gauge_pa([m for m in sim.commands if m.mono_s > t_kill])
     fault.check(
         "ramp at the slew limit, never up",
         bool(np.all(np.diff(ramp) <= 1.0))
@@ -291,7 +286,7 @@ def test_killed_launcher_takes_its_graph_down_cleanly(
         commands = probe.subscribe(FluidPressure, PRESSURE_COMMAND.name, qos_profile_sensor_data)
         measured = probe.subscribe(FluidPressure, PRESSURE_MEASURED.name, qos_profile_sensor_data)
         assert probe.spin_until(
-            lambda: len(measured) > 25 and _gauge(measured[-25:]).mean() > 1.5e5, 60.0
+            lambda: len(measured) > 25 and gauge_pa(measured[-25:]).mean() > 1.5e5, 60.0
         ), children.all_logs()
         # The bag must hold everything from the first command on (the run's start).
         t_start_wall = time.time() - (time.monotonic() - commands[0].mono_s)
@@ -341,7 +336,7 @@ def test_a_run_stopped_part_way_is_not_reported_as_a_success(
                 FluidPressure, PRESSURE_MEASURED.name, qos_profile_sensor_data
             )
             assert probe.spin_until(
-                lambda: len(measured) > 25 and _gauge(measured[-25:]).mean() > 1.5e5, 60.0
+                lambda: len(measured) > 25 and gauge_pa(measured[-25:]).mean() > 1.5e5, 60.0
             )
         rig = next(
             pid for pid, name in _children_of(launcher.pid).items() if name.startswith("sim")
@@ -413,8 +408,8 @@ class Driver:
         """Every 4 ms for ``duration_s``: publish ``make(now_ns)``'s (gauge Pa, stamp ns)."""
         end = time.monotonic() + duration_s
         while time.monotonic() < end:
-            for gauge_pa, stamp_ns in make(self.clock.now().nanoseconds):
-                self.pub.publish(messages.fluid_pressure(gauge_pa, stamp_ns, ""))
+            for value_pa, stamp_ns in make(self.clock.now().nanoseconds):
+                self.pub.publish(messages.fluid_pressure(value_pa, stamp_ns, ""))
             self.probe.spin_for(SAMPLE_S)
 
     def values(self, since: int = 0) -> dict[str, str]:
@@ -444,7 +439,7 @@ def test_reordered_commands_are_refused(driver: Driver, fault: FaultRecord) -> N
     n_diag, t_fault = len(driver.diags), time.monotonic()
     # The newer stamp says 1 bar; the older, arriving after it, says 2.5 bar.
     driver.send(1.5, lambda now: [(1.0e5, now), (2.5e5, now - 2_000_000)])
-    held = _gauge([m for m in driver.measured if m.mono_s > t_fault])
+    held = gauge_pa([m for m in driver.measured if m.mono_s > t_fault])
     fault.check(
         "the older intent never applied",
         held.size > 100 and held.max() < 1.0e5 + 5.0e3,
@@ -474,7 +469,7 @@ def test_delayed_commands_are_applied_and_their_latency_reported(
 ) -> None:
     n_diag = len(driver.diags)
     driver.send(2.5, lambda now: [(1.5e5, now - 80_000_000)])
-    meas = _gauge(driver.measured[-25:])
+    meas = gauge_pa(driver.measured[-25:])
     fault.check(
         "late but in-order commands are followed",
         abs(meas.mean() - 1.5e5) < 3.0e3,
@@ -496,7 +491,7 @@ def test_huge_and_non_finite_commands(driver: Driver, fault: FaultRecord) -> Non
     bad = [1.0e12, -1.0e9, float("nan"), float("inf"), -float("inf")]
     driver.send(1.0, lambda now: [(v, now + i) for i, v in enumerate(bad)])
     driver.send(0.5, lambda now: [(1.0e5, now)])
-    after = _gauge([m for m in driver.measured if m.mono_s > t_fault])
+    after = gauge_pa([m for m in driver.measured if m.mono_s > t_fault])
     fault.check(
         "range",
         after.size > 100 and after.max() <= MAX_PRESSURE_PA + NOISE_MARGIN_PA,
@@ -549,8 +544,8 @@ def test_malformed_trajectories_are_refused(sim: SimGraph, fault: FaultRecord) -
     print("\n".join(reasons))
     fault.check(
         "nothing moved",
-        _gauge(sim.commands).max(initial=0.0) == 0.0 and _gauge(sim.measured).max() < VENTED_PA,
-        f"commands up to {_gauge(sim.commands).max(initial=0.0):.0f} Pa",
+        gauge_pa(sim.commands).max(initial=0.0) == 0.0 and gauge_pa(sim.measured).max() < VENTED_PA,
+        f"commands up to {gauge_pa(sim.commands).max(initial=0.0):.0f} Pa",
     )
     fault.safe_after(0.0)
 
@@ -576,8 +571,8 @@ def test_a_locked_compensator_ignores_trajectories(
         )
         fault.check(
             "nothing moved",
-            _gauge(sim.measured).max() < VENTED_PA,
-            f"line reached {_gauge(sim.measured).max() / 1e5:.3f} bar",
+            gauge_pa(sim.measured).max() < VENTED_PA,
+            f"line reached {gauge_pa(sim.measured).max() / 1e5:.3f} bar",
         )
         fault.safe_after(0.0)
     finally:

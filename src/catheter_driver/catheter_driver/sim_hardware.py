@@ -11,6 +11,7 @@ import math
 import threading
 from dataclasses import dataclass
 
+from catheter_driver.command_order import CommandOrder
 from catheter_models.plant import Plant, PlantConfig, PlantSample
 
 
@@ -57,17 +58,15 @@ class SimHardware:
         self._refused = 0
         self._clamped = 0
         self._vents = 0
-        self._out_of_order = 0
-        self._last_stamp_ns: int | None = None
+        self._order = CommandOrder()
         self.last_refusal: str = ""
 
     def command(self, gauge_pa: float, now_s: float, stamp_ns: int | None = None) -> bool:
         """Take a valve set-point (gauge [Pa]) received at monotonic time ``now_s``.
 
         ``stamp_ns`` is the command's intended application time: one stamped before the last
-        command applied arrived out of order and is refused (applying it would step the
-        valve back to an older intent). The watchdog's vent forgets the last stamp, so a new
-        publisher, or a clock stepped back, is taken after at most one watchdog period.
+        command applied is refused (:class:`~catheter_driver.command_order.CommandOrder`);
+        the watchdog's vent forgets the last stamp.
 
         Returns:
             False if the command was refused (non-finite, or out of order); the previous
@@ -79,16 +78,10 @@ class SimHardware:
                 self._refused += 1
                 self.last_refusal = f"refused non-finite pressure command {gauge_pa!r}"
                 return False
-            if stamp_ns is not None:
-                if self._last_stamp_ns is not None and stamp_ns < self._last_stamp_ns:
-                    self._out_of_order += 1
-                    self.last_refusal = (
-                        "refused out-of-order pressure command: stamped "
-                        f"{(self._last_stamp_ns - stamp_ns) * 1e-6:.1f} ms before the last "
-                        "one applied"
-                    )
-                    return False
-                self._last_stamp_ns = stamp_ns
+            refusal = self._order.admit(stamp_ns)
+            if refusal:
+                self.last_refusal = refusal
+                return False
             clamped = min(max(gauge_pa, 0.0), self.max_pressure_pa)
             if clamped != gauge_pa:
                 self._clamped += 1
@@ -108,7 +101,7 @@ class SimHardware:
                 self._venting = True
                 self._vents += 1
             if stale:
-                self._last_stamp_ns = None
+                self._order.forget()
             command = 0.0 if self._venting else self._command_pa
         return self.plant.step(command)
 
@@ -126,5 +119,5 @@ class SimHardware:
         """Command counters since start."""
         with self._lock:
             return CommandCounters(
-                self._received, self._refused, self._clamped, self._vents, self._out_of_order
+                self._received, self._refused, self._clamped, self._vents, self._order.refused
             )

@@ -15,6 +15,7 @@ import threading
 from dataclasses import dataclass
 from typing import Generic, TypeVar
 
+from catheter_driver.command_order import CommandOrder
 from catheter_driver.devices.base import (
     Device,
     DeviceError,
@@ -146,21 +147,19 @@ class ValveDriverCore:
         self.commands_received = 0
         self.commands_refused = 0
         self.commands_clamped = 0
-        self.commands_out_of_order = 0
         self.watchdog_trips = 0
         self.last_refusal = ""
         self._watchdog_tripped = False
-        self._last_stamp_ns: int | None = None
+        self._order = CommandOrder()
 
     # -- intake (subscriber thread) ------------------------------------------------------
     def command(self, gauge_pa: float, now_s: float, stamp_ns: int | None = None) -> bool:
         """Take a set-point (gauge [Pa]); False if refused. Clamps to range.
 
         Refused: non-finite values, and commands stamped (``stamp_ns``, the intended
-        application time) before the last one applied: reordered or late, applying them
-        would step the valve back to an older intent. Venting (watchdog, ~/vent, disable)
-        forgets the last stamp, so a new publisher or a clock stepped back gets through
-        after at most one watchdog period.
+        application time) before the last one applied
+        (:class:`~catheter_driver.command_order.CommandOrder`); venting (watchdog, ~/vent,
+        disable) forgets the last stamp.
         """
         with self._lock:
             self.commands_received += 1
@@ -168,16 +167,10 @@ class ValveDriverCore:
                 self.commands_refused += 1
                 self.last_refusal = f"refused non-finite pressure command {gauge_pa!r}"
                 return False
-            if stamp_ns is not None:
-                if self._last_stamp_ns is not None and stamp_ns < self._last_stamp_ns:
-                    self.commands_out_of_order += 1
-                    self.last_refusal = (
-                        "refused out-of-order pressure command: stamped "
-                        f"{(self._last_stamp_ns - stamp_ns) * 1e-6:.1f} ms before the last "
-                        "one applied"
-                    )
-                    return False
-                self._last_stamp_ns = stamp_ns
+            refusal = self._order.admit(stamp_ns)
+            if refusal:
+                self.last_refusal = refusal
+                return False
             clamped = min(max(gauge_pa, self.min_pressure_pa), self.max_pressure_pa)
             if clamped != gauge_pa:
                 self.commands_clamped += 1
@@ -191,7 +184,7 @@ class ValveDriverCore:
         with self._lock:
             self._vent_requested = True
             self._last_command_s = None
-            self._last_stamp_ns = None
+            self._order.forget()
 
     def set_enabled(self, enabled: bool) -> None:
         """Disabled: vented, commands ignored until enabled again."""
@@ -199,12 +192,17 @@ class ValveDriverCore:
             self._enabled = enabled
             if not enabled:
                 self._last_command_s = None
-                self._last_stamp_ns = None
+                self._order.forget()
 
     @property
     def enabled(self) -> bool:
         """Whether commands are followed."""
         return self._enabled
+
+    @property
+    def commands_out_of_order(self) -> int:
+        """Commands refused as stamped before the last one applied."""
+        return self._order.refused
 
     # -- control tick --------------------------------------------------------------------
     def tick_setpoint(self, now_s: float, dt_s: float) -> SetpointTick:
@@ -217,7 +215,7 @@ class ValveDriverCore:
                 state, reason, target = "vented", "vented by ~/vent", 0.0
             elif stale:
                 state, target = "watchdog", 0.0
-                self._last_stamp_ns = None
+                self._order.forget()
                 reason = (
                     "no pressure command yet"
                     if self._last_command_s is None and not self._watchdog_tripped
