@@ -8,6 +8,7 @@ that check it: a stop request is always seen within ``poll_s``.
 
 from __future__ import annotations
 
+import gc
 import os
 import signal
 import sys
@@ -34,6 +35,9 @@ def install_stop_handlers() -> threading.Event:
     signal.signal(signal.SIGTERM, handler)
     return stop
 
+
+GC_FREEZE_ENV = "CATHETER_GC_FREEZE"
+"""'0' leaves start-up's objects to the garbage collector (for comparison only)."""
 
 PARENT_PID_ENV = "CATHETER_PARENT_PID"
 """Set by a launcher (catheter_control.bringup) to its pid: its nodes stop when it dies."""
@@ -78,6 +82,14 @@ def run_nodes(
             for factory in factories:
                 nodes.append(factory())
                 executor.add_node(nodes[-1])
+            # What start-up built lives as long as the process: collect once, then freeze it
+            # out of the collector's sight. A full collection over it holds the GIL, and so
+            # stops a loop thread, for 26 ms in the compensator (90,000 objects with the
+            # c-LSTM loaded): 26 missed deadlines at 1 kHz. Frozen, it takes microseconds.
+            # CATHETER_GC_FREEZE=0 turns this off (bench/bench_graph_timing.py's baseline).
+            if os.environ.get(GC_FREEZE_ENV, "1") != "0":
+                gc.collect()
+                gc.freeze()
             for node in nodes:
                 if hasattr(node, "start"):
                     node.start()
