@@ -60,9 +60,8 @@ def section(result: dict[str, Any]) -> str:
     if before and before[-1]:
         lines.append(
             f"  Of these, {before[-1]} were missed before the trajectory was sent (the node "
-            "starting up, at rest); the largest gap in the compensator's topics is "
-            f"{bag['topics'][next(iter(bag['topics']))]['max_gap_periods']:.0f} periods, "
-            "consistent with one stall there."
+            "starting up, at rest). The largest gap in the compensator's topics over the run: "
+            f"{bag['topics'][next(iter(bag['topics']))]['max_gap_periods']:.0f} periods."
         )
     if missed.get("growth") is not None:
         lines.append(
