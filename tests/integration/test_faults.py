@@ -21,6 +21,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -103,6 +104,16 @@ def _first_time(stamped: list[Stamped], after_s: float, test: Callable[[float], 
     return float("nan")
 
 
+@dataclass(frozen=True)
+class Kill:
+    """A node killed mid-run: when the run began (wall) and when the kill came."""
+
+    start_wall_s: float
+    n_diag: int
+    mono_s: float
+    wall_s: float
+
+
 class SimGraph:
     """recorder + sim_hardware + compensator as separate processes, and a probe on them."""
 
@@ -148,6 +159,20 @@ class SimGraph:
         )
         self.probe.spin_for(2.5)
         assert gauge_pa(self.measured[-25:]).mean() > 1.5e5, "not bent to 20 deg before the fault"
+
+    def kill_bent(self, node: str) -> Kill:
+        """Bend to 20 deg, then kill -9 ``node``; when, on both clocks."""
+        start_wall_s = time.time()
+        self.bend_and_hold()
+        kill = Kill(start_wall_s, len(self.diags), time.monotonic(), time.time())
+        self.graph.procs[node].send_signal(signal.SIGKILL)
+        return kill
+
+    def finish(self, fault: FaultRecord, kill: Kill) -> None:
+        """The range held over the run; the graph stopped; the bag kept up to the kill."""
+        _check_range(fault, self.commands, self.measured)
+        self.children.close()  # the recorder closes the bag
+        _check_bag_kept(fault, self.bag, kill.wall_s, kill.start_wall_s)
 
     def status_after(
         self, node: str, n_diag: int, test: Callable[[DiagnosticStatus], bool], timeout_s: float
@@ -197,12 +222,11 @@ def _check_bag_kept(
     safe="line vented: sim_hardware's watchdog (commands stop)",
 )
 def test_killed_compensator(sim: SimGraph, fault: FaultRecord) -> None:
-    t_start_wall = time.time()
-    sim.bend_and_hold()
-    n_diag = len(sim.diags)
-    t_kill, t_kill_wall = time.monotonic(), time.time()
-    sim.graph.procs["compensator"].send_signal(signal.SIGKILL)
-    status = sim.status_after(SIM, n_diag, lambda s: diagnostic_values(s)["venting"] == "True", 3.0)
+    kill = sim.kill_bent("compensator")
+    t_kill = kill.mono_s
+    status = sim.status_after(
+        SIM, kill.n_diag, lambda s: diagnostic_values(s)["venting"] == "True", 3.0
+    )
     fault.check(
         "reported",
         status is not None and status.message == "watchdog: no pressure command, valve vented",
@@ -213,9 +237,7 @@ def test_killed_compensator(sim: SimGraph, fault: FaultRecord) -> None:
     fault.safe_after(vented_s - t_kill)
     # The watchdog (100 ms) vents; then the line empties below 0.1 bar (~0.2 s from 2 bar).
     fault.check("vent", vented_s - t_kill <= WATCHDOG_S + 0.4, f"{vented_s - t_kill:.3f} s")
-    _check_range(fault, sim.commands, sim.measured)
-    sim.children.close()  # the recorder closes the bag
-    _check_bag_kept(fault, sim.bag, t_kill_wall, t_start_wall)
+    sim.finish(fault, kill)
 
 
 @pytest.mark.fault(
@@ -223,12 +245,11 @@ def test_killed_compensator(sim: SimGraph, fault: FaultRecord) -> None:
     safe="compensator stopped on pressure/measured stale, command ramped to 0",
 )
 def test_killed_rig(sim: SimGraph, fault: FaultRecord) -> None:
-    t_start_wall = time.time()
-    sim.bend_and_hold()
-    n_diag = len(sim.diags)
-    t_kill, t_kill_wall = time.monotonic(), time.time()
-    sim.graph.procs["sim_hardware"].send_signal(signal.SIGKILL)
-    status = sim.status_after(COMPENSATOR, n_diag, lambda s: s.level == DiagnosticStatus.ERROR, 3.0)
+    kill = sim.kill_bent("sim_hardware")
+    t_kill = kill.mono_s
+    status = sim.status_after(
+        COMPENSATOR, kill.n_diag, lambda s: s.level == DiagnosticStatus.ERROR, 3.0
+    )
     message = "" if status is None else status.message
     fault.check(
         "reported",
@@ -253,9 +274,7 @@ def test_killed_rig(sim: SimGraph, fault: FaultRecord) -> None:
         and bool(np.all(-np.diff(ramp) <= SLEW_PA_PER_S * SAMPLE_S + 1.0)),
         f"largest step {np.diff(ramp).min(initial=0):.0f} Pa",
     )
-    _check_range(fault, sim.commands, sim.measured)
-    sim.children.close()
-    _check_bag_kept(fault, sim.bag, t_kill_wall, t_start_wall)
+    sim.finish(fault, kill)
 
 
 @pytest.mark.fault(
