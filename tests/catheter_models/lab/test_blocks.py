@@ -8,11 +8,13 @@ import pytest
 
 from catheter_models.errors import ParameterError
 from catheter_models.lab.blocks import BLOCKS, block, ordered
+from catheter_models.lab.cores import make_core
 from catheter_models.lab.greybox import GreyBox
 from catheter_models.models import load_model
 from catheter_models.models.base import ModelError
 from catheter_models.models.data import simulate_recordings
 from catheter_models.models.drdpi import DRDPI
+from catheter_models.units import pa_to_bar, rad_to_deg
 
 RATE_HZ = 250.0
 
@@ -162,11 +164,20 @@ def test_each_block_streams_what_it_applies(effect: str) -> None:
     np.testing.assert_allclose(streamed, block(effect).apply(x, RATE_HZ, values), atol=1e-9)
 
 
-def test_a_greybox_with_every_block_streams_its_prediction(drdpi_and_data) -> None:
+@pytest.mark.parametrize("core", ["drdpi", "free_pi", "boucwen"])
+def test_a_greybox_with_every_block_streams_its_prediction(core: str, drdpi_and_data) -> None:
     drdpi, recs = drdpi_and_data
-    base = GreyBox.from_drdpi(drdpi)
-    model = GreyBox(effects=list(BLOCKS), n_play=base.n_play, n_deadband=base.n_deadband)
-    model._set(base.core_, STREAM_VALUES, base.rate_hz_)  # every block, at off-grid values
+    if core == "drdpi":
+        fitted = GreyBox.from_drdpi(drdpi).core_
+    else:
+        fitted = make_core(core, {"starts": 1} if core == "boucwen" else {})
+        fitted.fit(
+            [pa_to_bar(r.pressure_pa) for r in recs],
+            [rad_to_deg(r.angle_rad) for r in recs],
+            RATE_HZ,
+        )
+    model = GreyBox(effects=list(BLOCKS), core=core)
+    model._set(fitted, STREAM_VALUES, RATE_HZ)  # every block, at off-grid values
     pressure_pa = recs[1].pressure_pa[:1500]
     stream = model.stream()
     streamed = np.array([stream.step(p) for p in pressure_pa])

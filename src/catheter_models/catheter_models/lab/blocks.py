@@ -79,6 +79,24 @@ class Block(ABC):
         """Why ``inputs`` (pressure, bar) cannot identify this block ('' if they can)."""
         return ""
 
+    def apply_columns(
+        self, m: FloatArray, rate_hz: float, values: Sequence[float], reference: FloatArray
+    ) -> FloatArray:
+        """An output block on every column of ``m`` (n, k), for a core linear in its weights.
+
+        Every output block is affine in its input for fixed parameters (the tip once its
+        damping schedule is fixed by ``reference``, the signal that enters it), so
+        ``B(M w) = L(M) w + B(0)``: columns get the linear part ``B(m) - B(0)``, and the
+        last column (the chain's running offset) also gets ``B(0)``. The grey box then
+        solves a linear core's weights exactly for any block parameters.
+        """
+        zero = self.apply(np.zeros(m.shape[0]), rate_hz, values)
+        out = np.empty_like(m)
+        for k in range(m.shape[1]):
+            out[:, k] = self.apply(np.ascontiguousarray(m[:, k]), rate_hz, values) - zero
+        out[:, -1] += zero
+        return out
+
     @classmethod
     def defaults(cls) -> list[float]:
         """Initial values of the parameters, in order."""
@@ -219,6 +237,16 @@ class Creep(Block):
         out: FloatArray = (1.0 - fraction) * x + fraction * _lowpass1(x, rate_hz, tau)
         return out
 
+    def apply_columns(
+        self, m: FloatArray, rate_hz: float, values: Sequence[float], reference: FloatArray
+    ) -> FloatArray:
+        """Creep is linear: every column at once."""
+        fraction, tau = values
+        a = math.exp(-1.0 / (rate_hz * tau))
+        lag, _ = sps.lfilter([1.0 - a], [1.0, -a], m, axis=0, zi=a * m[:1, :])
+        out: FloatArray = (1.0 - fraction) * m + fraction * lag
+        return out
+
     def streamer(self, rate_hz: float, values: Sequence[float]) -> Step:
         """Creep, one sample at a time."""
         fraction, tau = values
@@ -273,6 +301,28 @@ def _tip_response(  # noqa: PLR0917 - numba compiles positional scalars only
     return out
 
 
+@njit(cache=True)
+def _tip_columns(  # noqa: PLR0917 - numba compiles positional scalars only
+    m: FloatArray, dt_s: float, omega: float, zeta: FloatArray, n_sub: int, out: FloatArray
+) -> None:  # pragma: no cover - compiled; exercised through TipDynamics.apply_columns
+    """:func:`_tip_response` on every column with a given damping schedule (linear then).
+
+    Row by row, the columns innermost: the memory order of ``m``, so the loop vectorises.
+    """
+    h = dt_s / n_sub
+    k2 = h * omega * omega
+    y = m[0].copy()
+    v = np.zeros(m.shape[1])
+    for i in range(m.shape[0]):
+        out[i] = y
+        inv = 1.0 / (1.0 + 2.0 * zeta[i] * omega * h)
+        row = m[i]
+        for _ in range(n_sub):
+            for c in range(row.size):
+                v[c] = (v[c] + k2 * (row[c] - y[c])) * inv
+                y[c] += h * v[c]
+
+
 class TipDynamics(Block):
     """Tip inertia against bending stiffness, damped more the harder the wire pulls.
 
@@ -308,6 +358,19 @@ class TipDynamics(Block):
         x = np.ascontiguousarray(x, dtype=np.float64)
         state = np.array([x[0], 0.0])  # at rest on the first sample
         out: FloatArray = _tip_response(x, *self._settings(rate_hz, values), state)
+        return out
+
+    def apply_columns(
+        self, m: FloatArray, rate_hz: float, values: Sequence[float], reference: FloatArray
+    ) -> FloatArray:
+        """The tip on every column, its damping scheduled by the bend entering it.
+
+        Exactly :meth:`apply` on ``M w`` when ``reference`` is ``M w``.
+        """
+        dt, omega, zeta0, growth, n_sub = self._settings(rate_hz, values)
+        zeta = zeta0 + growth * np.maximum(np.asarray(reference, dtype=float), 0.0)
+        out = np.empty_like(m)
+        _tip_columns(np.ascontiguousarray(m), dt, omega, zeta, n_sub, out)
         return out
 
     def streamer(self, rate_hz: float, values: Sequence[float]) -> Step:
@@ -369,6 +432,14 @@ class Drift(Block):
         """The bend [deg] plus a trend from the recording's start."""
         # Internal output unit is degrees: the rate is stored in rad/s.
         out: FloatArray = x + math.degrees(values[0]) * np.arange(x.size) / rate_hz
+        return out
+
+    def apply_columns(
+        self, m: FloatArray, rate_hz: float, values: Sequence[float], reference: FloatArray
+    ) -> FloatArray:
+        """The trend is an offset: columns unchanged, the trend on the offset column."""
+        out = m.copy()
+        out[:, -1] += math.degrees(values[0]) * np.arange(m.shape[0]) / rate_hz
         return out
 
     def streamer(self, rate_hz: float, values: Sequence[float]) -> Step:

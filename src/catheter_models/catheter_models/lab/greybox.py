@@ -1,17 +1,28 @@
-"""A grey-box model: a readable chain of physical-effect blocks around the thesis's DRDPI.
+"""A grey-box model: a readable chain of physical-effect blocks around a hysteresis core.
 
-    GreyBox()                                   # the default chain: the DRDPI
+    GreyBox()                                   # the default chain: the thesis's DRDPI
+    GreyBox(core="free_pi")                     # another hysteresis law (lab.cores)
     GreyBox(effects=("pneumatic_lag",))         # adding an effect is one line...
     model.with_effect("creep").fit(train)       # ...or one call, warm-started from model
+    model.with_core("boucwen").fit(train)       # a core change keeps the blocks
 
-In the model file (``greybox.json``) the chain is the list ``"effects"``; editing it and
-refitting (``catheter-lab train greybox --set 'effects=["creep"]' ...``) is the same thing.
+In the model file (``greybox.json``) the chain is the list ``"effects"`` and the core's name;
+editing them and refitting (``catheter-lab train greybox --set 'effects=["creep"]' ...``) is
+the same thing.
 
-Identification: the DRDPI core is identified as the DRDPI is (global search, then polish),
-unless the model is warm-started from a fitted one; each block is then initialised by a
-coarse grid over its parameters with the rest held, and finally every parameter, core and
-blocks together, is polished by least squares on eq. 5.12's residuals. A warm-started refit
-(what a diagnosis runs once per candidate effect) takes seconds.
+Identification. The core is identified on its own first (or warm-started from the model a
+block is added to). Each new block's parameters are then searched over their whole range on
+a grid (log-spaced for time constants), so that a block is found even where the core had
+mimicked part of it:
+
+* a core whose output is linear in its weights (``free_pi``) is solved again, exactly, at
+  every grid point with the block in the chain (variable projection): the core cannot keep
+  what it absorbed;
+* any other core is held at each grid point.
+
+The best few grid points start a joint least-squares polish (multi-start): of the blocks'
+parameters with the linear core's weights solved inside, or of the core's and the blocks'
+parameters together. The best polish is kept.
 """
 
 from __future__ import annotations
@@ -20,16 +31,17 @@ import itertools
 import json
 import math
 import time
+from collections import OrderedDict
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any, ClassVar, Self
+from typing import Any, ClassVar, Final, Self
 
 import numpy as np
 import numpy.typing as npt
 from scipy import optimize
 
 from catheter_models.errors import ParameterError
-from catheter_models.hysteresis import operators as op
-from catheter_models.lab.blocks import BLOCKS, Block, block, ordered
+from catheter_models.lab.blocks import BLOCKS, Block, BlockParam, block, ordered
+from catheter_models.lab.cores import CORES, Core, DRDPICore, FreePI, make_core
 from catheter_models.model_dir import Manifest
 from catheter_models.models.base import (
     DataRequirement,
@@ -42,33 +54,74 @@ from catheter_models.models.base import (
     as_input,
     check_finite_step,
 )
-from catheter_models.models.drdpi import (
-    DRDPI,
-    DRDPIParams,
-    params_to_search,
-    rate_alpha,
-    search_to_params,
-)
+from catheter_models.models.drdpi import DRDPI
 from catheter_models.models.evaluate import pooled_rmse
-from catheter_models.models.identify import Budget
 from catheter_models.units import deg_to_rad, pa_to_bar, rad_to_deg
 
 GREYBOX_FILE = "greybox.json"
-GREYBOX_FORMAT = 1
+GREYBOX_FORMAT = 2
+"""2: the core is named with its settings and values; 1 (read too): the DRDPI only."""
+
+_DRDPI_KEYS: Final = ("n_play", "n_deadband", "rate_filter_s", "budget")
+"""Constructor arguments that shape the DRDPI core (kept for format-1 files and callers)."""
+
+REDUCED_COLUMNS: Final = 32
+"""Play combinations a linear core's block search works in (then every play again)."""
+
+STARTS: Final = 3
+"""Grid points that start a joint polish (multi-start)."""
+
+GRID_POINTS: Final = {1: 12, 2: 6, 3: 4}
+"""Grid points per block parameter, by the number of the block's parameters."""
+
+
+def _grid(p: BlockParam, n_params: int) -> FloatArray:
+    """The search grid of one block parameter: log-spaced over a positive range."""
+    n = GRID_POINTS.get(n_params, 3)
+    if p.low >= 0.0 and p.high > 0.0:
+        low = p.low if p.low > 0.0 else 1e-2 * p.high
+        points = np.geomspace(low, p.high, n)
+        return np.concatenate([[0.0], points]) if p.low == 0.0 else points
+    return np.linspace(p.low, p.high, n + 1 - n % 2)  # odd: 0 is on the grid
+
+
+class _Unit:
+    """Maps bounded parameters to [0, 1] (log for ranges over a decade) for the polish."""
+
+    def __init__(self, low: FloatArray, high: FloatArray) -> None:
+        self.low, self.high = np.asarray(low, dtype=float), np.asarray(high, dtype=float)
+        self.log = (self.low > 0.0) & (self.high / np.where(self.low > 0, self.low, 1) > 10.0)
+
+    def to_unit(self, v: FloatArray) -> FloatArray:
+        v = np.clip(v, self.low, self.high)
+        out = (v - self.low) / (self.high - self.low)
+        lg = self.log
+        out[lg] = np.log(v[lg] / self.low[lg]) / np.log(self.high[lg] / self.low[lg])
+        return np.clip(out, 0.0, 1.0)
+
+    def from_unit(self, u: FloatArray) -> FloatArray:
+        u = np.clip(u, 0.0, 1.0)
+        out = self.low + u * (self.high - self.low)
+        lg = self.log
+        out[lg] = self.low[lg] * np.exp(u[lg] * np.log(self.high[lg] / self.low[lg]))
+        return out
 
 
 class GreyBox(Model):
-    """A chain of effect blocks around the DRDPI: valve pressure [Pa] in, bend [rad] out.
+    """A chain of effect blocks around a hysteresis core: pressure [Pa] in, bend [rad] out.
 
-    Input blocks -> DRDPI (play, rate dependence, deadband, asymmetry, saturation) -> output
+    Input blocks -> core (play, rate dependence, deadband, asymmetry, saturation) -> output
     blocks.
 
     Args:
-        effects: Catalogue effects to add to the default chain (:data:`~.blocks.BLOCKS`);
-            their order in the chain is fixed by physics (input side, then output side).
-        n_play, n_deadband, rate_filter_s: The DRDPI core's structure (see DRDPI).
-        budget: Effort of the core's global search when not warm-started.
-        polish_evals: Least-squares evaluations of the joint polish at most.
+        effects: Catalogue effects to add to the core (:data:`~.blocks.BLOCKS`); their
+            order in the chain is fixed by physics (input side, then output side).
+        core: The hysteresis law (:data:`~.cores.CORES`): ``drdpi`` (the thesis's, default),
+            ``free_pi``, ``boucwen``.
+        core_settings: The core's structure (see its class), e.g. ``{"n_offsets": 10}``.
+        n_play, n_deadband, rate_filter_s, budget: The DRDPI core's structure and search
+            effort (the same as ``core_settings`` for ``core="drdpi"``).
+        polish_evals: Least-squares evaluations of each joint polish at most.
         seed: Seed of the core's search.
     """
 
@@ -76,17 +129,19 @@ class GreyBox(Model):
     direction = "forward"
     requirement: ClassVar[DataRequirement] = DRDPI.requirement
 
-    core_: DRDPIParams
+    core_: Core
     blocks_: dict[str, list[float]]
 
     def __init__(
         self,
         *,
         effects: Sequence[str] = (),
-        n_play: int = 10,
-        n_deadband: int = 4,
-        rate_filter_s: float = 0.02,
-        budget: Budget | Mapping[str, Any] | None = None,
+        core: str = "drdpi",
+        core_settings: Mapping[str, Any] | None = None,
+        n_play: int | None = None,
+        n_deadband: int | None = None,
+        rate_filter_s: float | None = None,
+        budget: Mapping[str, Any] | None = None,
         polish_evals: int = 300,
         seed: int = 0,
     ) -> None:
@@ -95,20 +150,26 @@ class GreyBox(Model):
         self.effects = ordered(list(effects))
         # Built once: the polish runs the chain hundreds of times.
         self._blocks: dict[str, Block] = {e: block(e) for e in self.effects}
-        self._core_model = DRDPI(
-            n_play=n_play,
-            n_deadband=n_deadband,
-            rate_filter_s=rate_filter_s,
-            budget=budget,
-            seed=seed,
-        )
-        self.n_play, self.n_deadband, self.rate_filter_s = n_play, n_deadband, rate_filter_s
-        self.budget = self._core_model.budget
+        settings = dict(core_settings or {})
+        legacy = {
+            k: v
+            for k, v in zip(_DRDPI_KEYS, (n_play, n_deadband, rate_filter_s, budget), strict=True)
+            if v is not None
+        }
+        if legacy and core != "drdpi":
+            raise ParameterError(
+                f"{', '.join(legacy)} shape the drdpi core; core {core!r} takes core_settings"
+            )
+        if core == "drdpi":
+            settings.setdefault("seed", seed)
+        self.core_name = core
+        self.core_settings = {**settings, **legacy}
+        self._template = make_core(core, self.core_settings)  # checks name and settings now
         if not (isinstance(polish_evals, int) and polish_evals >= 0):
             raise ParameterError(f"polish_evals = {polish_evals!r} must be an integer >= 0")
         self.polish_evals = polish_evals
         self.seed = int(seed)
-        self._warm: tuple[DRDPIParams, dict[str, list[float]]] | None = None
+        self._warm: tuple[Core, dict[str, list[float]]] | None = None
 
     # -- the chain ---------------------------------------------------------------------------
     @property
@@ -116,15 +177,39 @@ class GreyBox(Model):
         """The chain as a person reads it, input to output."""
         inputs = [e for e in self.effects if BLOCKS[e].side == "input"]
         outputs = [e for e in self.effects if BLOCKS[e].side == "output"]
-        return (*inputs, "drdpi", *outputs)
+        return (*inputs, self.core_name, *outputs)
+
+    def _fitted_now(self) -> bool:
+        return getattr(self, "core_", None) is not None
 
     def with_effect(self, effect: str) -> GreyBox:
         """This chain plus ``effect``, unfitted, warm-started from this model if fitted."""
         if effect in self.effects:
             raise ParameterError(f"the model has {effect!r} already: {' -> '.join(self.chain)}")
-        new = GreyBox(effects=(*self.effects, effect), **self._structure(), **self._effort())
-        if getattr(self, "core_", None) is not None:
-            new._warm = (self.core_, {k: list(v) for k, v in self.blocks_.items()})
+        new = GreyBox(
+            effects=(*self.effects, effect),
+            core=self.core_name,
+            core_settings=self.core_settings,
+            polish_evals=self.polish_evals,
+            seed=self.seed,
+        )
+        if self._fitted_now():
+            new._warm = (self.core_.copy(), {k: list(v) for k, v in self.blocks_.items()})
+        return new
+
+    def with_core(self, core: str, core_settings: Mapping[str, Any] | None = None) -> GreyBox:
+        """The same blocks around another core, unfitted; the blocks' values start the search."""
+        if core not in CORES:
+            raise ParameterError(f"unknown core {core!r}; known cores: {', '.join(CORES)}")
+        new = GreyBox(
+            effects=self.effects,
+            core=core,
+            core_settings=core_settings,
+            polish_evals=self.polish_evals,
+            seed=self.seed,
+        )
+        if self._fitted_now():
+            new._start_blocks = {k: list(v) for k, v in self.blocks_.items()}
         return new
 
     @classmethod
@@ -133,36 +218,16 @@ class GreyBox(Model):
         gb = cls(
             n_play=model.n_play, n_deadband=model.n_deadband, rate_filter_s=model.rate_filter_s
         )
-        gb._set(model.params_, {}, model.fitted_rate_hz)
+        core = gb._template
+        assert isinstance(core, DRDPICore)
+        core.set_params(model.params_)
+        gb._set(core, {}, model.fitted_rate_hz)
         return gb
 
-    def _structure(self) -> dict[str, Any]:
-        return {
-            "n_play": self.n_play,
-            "n_deadband": self.n_deadband,
-            "rate_filter_s": self.rate_filter_s,
-        }
-
-    def _effort(self) -> dict[str, Any]:
-        return {
-            "budget": self.budget.to_dict(),
-            "polish_evals": self.polish_evals,
-            "seed": self.seed,
-        }
-
-    def _set(
-        self, core: DRDPIParams, blocks: Mapping[str, Sequence[float]], rate_hz: float
-    ) -> None:
+    def _set(self, core: Core, blocks: Mapping[str, Sequence[float]], rate_hz: float) -> None:
         self.core_ = core
         self.blocks_ = {e: [float(v) for v in blocks[e]] for e in self.effects}
         self.rate_hz_ = float(rate_hz)
-        self._coef = op.drdpi_coefficients(
-            core.as_array(),
-            self.n_play,
-            self.n_deadband,
-            self.rate_hz_,
-            rate_alpha(self.rate_filter_s, self.rate_hz_),
-        )
 
     def block_values(self) -> dict[str, dict[str, float]]:
         """Each block's identified parameters by name (SI)."""
@@ -173,33 +238,42 @@ class GreyBox(Model):
         }
 
     # -- simulation (internal units: bar in, deg out) ----------------------------------------
-    def _run(
-        self,
-        x_bar: FloatArray,
-        rate_hz: float,
-        coef: FloatArray,
-        blocks: Mapping[str, Sequence[float]],
+    def _inputs(
+        self, x_bar: FloatArray, rate_hz: float, blocks: Mapping[str, Sequence[float]]
     ) -> FloatArray:
         for e in self.effects:
             if BLOCKS[e].side == "input":
                 x_bar = self._blocks[e].apply(x_bar, rate_hz, blocks[e])
-        y = np.empty(x_bar.size)
-        state = np.zeros(op.chain_state_size(coef))
-        op.chain_run(np.ascontiguousarray(x_bar), coef, state, y)
+        return x_bar
+
+    def _outputs(
+        self, y: FloatArray, rate_hz: float, blocks: Mapping[str, Sequence[float]]
+    ) -> FloatArray:
         for e in self.effects:
             if BLOCKS[e].side == "output":
                 y = self._blocks[e].apply(y, rate_hz, blocks[e])
         return y
 
+    def _run(
+        self,
+        x_bar: FloatArray,
+        rate_hz: float,
+        core: Callable[[FloatArray], FloatArray],
+        blocks: Mapping[str, Sequence[float]],
+    ) -> FloatArray:
+        return self._outputs(core(self._inputs(x_bar, rate_hz, blocks)), rate_hz, blocks)
+
     def _fitted(self) -> None:
-        if getattr(self, "core_", None) is None:
+        if not self._fitted_now():
             raise NotFittedError("greybox model is not fitted: call fit() or load() first")
 
     def predict(self, input_si: npt.ArrayLike) -> FloatArray:
         """Bend [rad] for a valve pressure signal [Pa gauge], from rest."""
         self._fitted()
         x = pa_to_bar(as_input(input_si, "pressure_pa"))
-        out: FloatArray = deg_to_rad(self._run(x, self.rate_hz_, self._coef, self.blocks_))
+        core = self.core_
+        y = self._run(x, self.rate_hz_, lambda v: core.run(v, self.rate_hz_), self.blocks_)
+        out: FloatArray = deg_to_rad(y)
         return out
 
     def stream(self) -> _GreyBoxStream:
@@ -215,7 +289,7 @@ class GreyBox(Model):
         *,
         progress: bool = True,
     ) -> Self:
-        """Identify the core (unless warm-started) and every block, then polish all jointly."""
+        """Identify the core (unless warm-started) and every block, then polish jointly."""
         t0 = time.perf_counter()
         rate = self._prepare(train, validation)
         xs = [pa_to_bar(r.pressure_pa) for r in train]
@@ -224,129 +298,47 @@ class GreyBox(Model):
             problem = self._blocks[e].excitation_problem(xs, rate)
             if problem:
                 raise ParameterError(f"too little excitation to identify {e}: {problem}")
+        start_blocks: dict[str, list[float]] = dict(getattr(self, "_start_blocks", {}))
         if self._warm is not None:
-            core, blocks = self._warm[0], dict(self._warm[1])
+            core, blocks = self._warm[0].copy(), dict(self._warm[1])
         else:
-            core_model = DRDPI(**self._structure(), budget=self.budget, seed=self.seed)
-            core = core_model.fit(train, progress=progress).params_
+            core = make_core(self.core_name, self.core_settings)
+            core.fit(xs, ys, rate, progress=progress)
             blocks = {}
+        new = [e for e in self.effects if e not in blocks and e not in start_blocks]
+        blocks.update(start_blocks)
         for e in self.effects:
             blocks.setdefault(e, self._blocks[e].defaults())
-        alpha = rate_alpha(self.rate_filter_s, rate)
-
-        def coef_of(theta: FloatArray) -> FloatArray:
-            c: FloatArray = op.drdpi_coefficients(theta, self.n_play, self.n_deadband, rate, alpha)
-            return c
-
-        def loss(coef: FloatArray, bl: Mapping[str, Sequence[float]]) -> float:
-            return float(
-                sum(
-                    np.mean((self._run(x, rate, coef, bl) - y) ** 2)
-                    for x, y in zip(xs, ys, strict=True)
-                )
-            )
-
-        # Blocks new to the chain start from a coarse grid, the core and other blocks held.
-        coef0 = coef_of(core.as_array())
-        new = [e for e in self.effects if self._warm is None or e not in self._warm[1]]
-        for e in new:
-            grids = [
-                np.geomspace(max(p.low, 1e-3 * p.high), p.high, 9)
-                if p.low >= 0
-                else np.linspace(p.low, p.high, 9)
-                for p in BLOCKS[e].params
-            ]
-            best = (loss(coef0, blocks), list(blocks[e]))
-            for combo in itertools.product(*grids):
-                trial = {**blocks, e: list(combo)}
-                value = loss(coef0, trial)
-                if value < best[0]:
-                    best = (value, list(combo))
-            blocks[e] = best[1]
-        core, blocks, polish_loss = self._polish(
-            core=core, blocks=blocks, xs=xs, ys=ys, rate=rate, coef_of=coef_of
-        )
-        self._set(core, blocks, rate)
+        if isinstance(core, FreePI):
+            fitter: _Fitter = _LinearFitter(self, core, xs, ys, rate)
+        else:
+            fitter = _NonlinearFitter(self, core, xs, ys, rate)
+        blocks, loss = fitter.search(blocks, new)
+        self._set(fitter.core, blocks, rate)
         extra: dict[str, Any] = {
             "chain": list(self.chain),
-            "core": core.to_dict(),
+            "core": {"name": self.core_name, **self.core_.values()},
             "blocks": self.block_values(),
-            "train_loss_deg2": polish_loss,
+            "train_loss_deg2": loss,
         }
         if validation:
             extra["validation_rmse_deg"] = {
                 r.name: float(rad_to_deg(pooled_rmse(self, [r]))) for r in validation
             }
         self.fit_report_ = FitReport(
-            duration_s=time.perf_counter() - t0, train_loss=[polish_loss], extra=extra
+            duration_s=time.perf_counter() - t0, train_loss=[loss], extra=extra
         )
         return self
 
-    def _polish(
-        self,
-        *,
-        core: DRDPIParams,
-        blocks: dict[str, list[float]],
-        xs: Sequence[FloatArray],
-        ys: Sequence[FloatArray],
-        rate: float,
-        coef_of: Callable[[FloatArray], FloatArray],
-    ) -> tuple[DRDPIParams, dict[str, list[float]], float]:
-        """Least squares over the core's free search coordinates and every block parameter."""
-        bounds = self._core_model.bounds
-        free = bounds.free
-        lower_core = np.asarray(bounds.lower)[free]
-        upper_core = np.asarray(bounds.upper)[free]
-        search0 = params_to_search(core.as_array()[None, :])[0]
-        block_specs = [(e, p) for e in self.effects for p in BLOCKS[e].params]
-        lo = np.concatenate([lower_core, [p.low for _, p in block_specs]])
-        hi = np.concatenate([upper_core, [p.high for _, p in block_specs]])
-        v0 = np.concatenate([search0[free], [v for e in self.effects for v in blocks[e]]])
-        v0 = np.clip(v0, lo, hi)
-        weights = [1.0 / math.sqrt(x.size) for x in xs]
-
-        def unpack(v: FloatArray) -> tuple[FloatArray, dict[str, list[float]]]:
-            search = search0.copy()
-            search[free] = v[: free.sum()]
-            theta = search_to_params(search[None, :])[0]
-            out: dict[str, list[float]] = {e: [] for e in self.effects}
-            for (e, _), value in zip(block_specs, v[free.sum() :], strict=True):
-                out[e].append(float(value))
-            return theta, out
-
-        def residuals(v: FloatArray) -> FloatArray:
-            theta, bl = unpack(v)
-            margin = float(op.drdpi_monotone_margin(theta, self.n_play, self.n_deadband))
-            if not margin > 0.0:
-                return np.full(sum(x.size for x in xs), 1e3 * (1.0 - margin))
-            coef = coef_of(theta)
-            return np.concatenate(
-                [
-                    (self._run(x, rate, coef, bl) - y) * w
-                    for x, y, w in zip(xs, ys, weights, strict=True)
-                ]
-            )
-
-        if self.polish_evals > 0:
-            result = optimize.least_squares(
-                residuals,
-                v0,
-                bounds=(lo, hi),
-                method="trf",
-                max_nfev=self.polish_evals,
-                x_scale="jac",
-                diff_step=1e-3,
-            )
-            v_best = result.x if 2 * result.cost <= float(np.sum(residuals(v0) ** 2)) else v0
-        else:
-            v_best = v0
-        theta, bl = unpack(v_best)
-        final = float(np.sum(residuals(v_best) ** 2))
-        return DRDPIParams.from_array(theta), bl, final
-
     # -- persistence ---------------------------------------------------------------------------
     def _settings(self) -> dict[str, Any]:
-        return {"effects": list(self.effects), **self._structure(), **self._effort()}
+        return {
+            "effects": list(self.effects),
+            "core": self.core_name,
+            "core_settings": self.core_settings,
+            "polish_evals": self.polish_evals,
+            "seed": self.seed,
+        }
 
     def _payload(self) -> dict[str, bytes]:
         self._fitted()
@@ -354,8 +346,11 @@ class GreyBox(Model):
             "format": GREYBOX_FORMAT,
             "effects": list(self.effects),
             "chain": list(self.chain),
-            "structure": self._structure(),
-            "core": self.core_.to_dict(),
+            "core": {
+                "name": self.core_name,
+                "settings": self.core_.settings(),
+                "values": self.core_.values(),
+            },
             "blocks": self.block_values(),
             "units": {e: {p.name: p.unit for p in BLOCKS[e].params} for e in self.effects},
         }
@@ -366,11 +361,15 @@ class GreyBox(Model):
         try:
             doc = json.loads(payload[GREYBOX_FILE])
             effects = doc["effects"]
-            core = DRDPIParams.from_dict(doc["core"])
             raw_blocks = doc["blocks"]
+            if doc.get("format", 1) == 1:  # the DRDPI core, its parameters flat
+                name, settings, values = "drdpi", dict(doc.get("structure", {})), doc["core"]
+            else:
+                name = doc["core"]["name"]
+                settings, values = dict(doc["core"]["settings"]), doc["core"]["values"]
         except (KeyError, ValueError, TypeError) as exc:
             raise ModelError(f"{GREYBOX_FILE} is malformed: {exc}") from None
-        model = cls(effects=effects, **doc.get("structure", {}))
+        model = cls(effects=effects, core=name, core_settings=settings)
         missing = [e for e in model.effects if e not in raw_blocks]
         if missing:
             raise ModelError(
@@ -381,12 +380,278 @@ class GreyBox(Model):
         rate = manifest.metrics.get("rate_hz")
         if not isinstance(rate, (int, float)):
             raise ModelError("greybox manifest metrics lack a valid 'rate_hz'")
+        core = make_core(name, settings)
+        core.load_values(values)
         model._set(core, blocks, float(rate))
         return model
 
 
+class _Fitter:
+    """Searches new blocks' parameters and polishes the chain for one kind of core."""
+
+    def __init__(
+        self,
+        model: GreyBox,
+        core: Core,
+        xs: Sequence[FloatArray],
+        ys: Sequence[FloatArray],
+        rate: float,
+    ) -> None:
+        self.model, self.core, self.xs, self.ys, self.rate = model, core, xs, ys, rate
+        self.weights = [1.0 / math.sqrt(x.size) for x in xs]
+        self.specs = [(e, p) for e in model.effects for p in BLOCKS[e].params]
+
+    def pack(self, blocks: Mapping[str, Sequence[float]]) -> FloatArray:
+        return np.array([v for e in self.model.effects for v in blocks[e]], dtype=float)
+
+    def unpack(self, v: FloatArray) -> dict[str, list[float]]:
+        out: dict[str, list[float]] = {e: [] for e in self.model.effects}
+        for (e, _), value in zip(self.specs, v, strict=True):
+            out[e].append(float(value))
+        return out
+
+    def block_bounds(self) -> tuple[FloatArray, FloatArray]:
+        return (
+            np.array([p.low for _, p in self.specs]),
+            np.array([p.high for _, p in self.specs]),
+        )
+
+    def loss(self, blocks: Mapping[str, Sequence[float]]) -> float:
+        raise NotImplementedError
+
+    def prepare(self, blocks: Mapping[str, Sequence[float]], new: Sequence[str]) -> None:
+        """Set-up before a search (nothing by default)."""
+
+    def polish(self, blocks: dict[str, list[float]]) -> tuple[dict[str, list[float]], float]:
+        raise NotImplementedError
+
+    def search(
+        self, blocks: dict[str, list[float]], new: Sequence[str]
+    ) -> tuple[dict[str, list[float]], float]:
+        """Grid over each new block (the rest held), then polish from the best few points."""
+        self.prepare(blocks, new)
+        starts = [dict(blocks)]
+        for e in new:
+            scored: list[tuple[float, dict[str, list[float]]]] = []
+            base = starts[0]
+            n_params = len(BLOCKS[e].params)
+            for combo in itertools.product(*(_grid(p, n_params) for p in BLOCKS[e].params)):
+                trial = {**base, e: [float(c) for c in combo]}
+                scored.append((self.loss(trial), trial))
+            scored.sort(key=lambda t: t[0])
+            starts = [t[1] for t in scored[:STARTS]]
+        best: tuple[float, dict[str, list[float]], Core] | None = None
+        core0 = self.core
+        for start in starts:
+            self.core = core0.copy()
+            polished, value = self.polish(start)
+            if best is None or value < best[0]:
+                best = (value, polished, self.core)
+        assert best is not None
+        self.core = best[2]
+        return best[1], best[0]
+
+
+class _NonlinearFitter(_Fitter):
+    """Core held during the grid; polish of core and blocks together."""
+
+    def __init__(self, *args: Any) -> None:
+        super().__init__(*args)
+        rate = self.rate
+        self._held = lambda x: self.core.run(x, rate)
+
+    def loss(self, blocks: Mapping[str, Sequence[float]]) -> float:
+        return float(
+            sum(
+                np.mean((self.model._run(x, self.rate, self._held, blocks) - y) ** 2)
+                for x, y in zip(self.xs, self.ys, strict=True)
+            )
+        )
+
+    def polish(self, blocks: dict[str, list[float]]) -> tuple[dict[str, list[float]], float]:
+        core = self.core
+        lo_c, hi_c = core.bounds()
+        lo_b, hi_b = self.block_bounds()
+        n_core = lo_c.size
+        lo, hi = np.concatenate([lo_c, lo_b]), np.concatenate([hi_c, hi_b])
+        v0 = np.clip(np.concatenate([core.vector(), self.pack(blocks)]), lo, hi)
+        n_total = sum(x.size for x in self.xs)
+
+        def residuals(v: FloatArray) -> FloatArray:
+            run = core.runner(v[:n_core], self.rate)
+            if run is None:
+                return np.full(n_total, 1e3)
+            bl = self.unpack(v[n_core:])
+            return np.concatenate(
+                [
+                    (self.model._run(x, self.rate, run, bl) - y) * w
+                    for x, y, w in zip(self.xs, self.ys, self.weights, strict=True)
+                ]
+            )
+
+        v_best = v0
+        if self.model.polish_evals > 0:
+            result = optimize.least_squares(
+                residuals,
+                v0,
+                bounds=(lo, hi),
+                method="trf",
+                max_nfev=self.model.polish_evals,
+                x_scale="jac",
+                diff_step=1e-3,
+            )
+            if 2 * result.cost <= float(np.sum(residuals(v0) ** 2)):
+                v_best = result.x
+        core.set_vector(v_best[:n_core])
+        return self.unpack(v_best[n_core:]), float(np.sum(residuals(v_best) ** 2))
+
+
+class _LinearFitter(_Fitter):
+    """The core's weights solved exactly for every block setting (variable projection)."""
+
+    def __init__(self, *args: Any) -> None:
+        super().__init__(*args)
+        self._designs: OrderedDict[tuple[float, ...], list[FloatArray]] = OrderedDict()
+        self.basis: FloatArray | None = None
+        self.betas = {self.free.beta_s or 0.0}
+
+    @property
+    def free(self) -> FreePI:
+        """The core being fitted (a copy per start of the polish)."""
+        assert isinstance(self.core, FreePI)
+        return self.core
+
+    def prepare(self, blocks: Mapping[str, Sequence[float]], new: Sequence[str]) -> None:
+        """Reduce the design; free the rate factor when an input block is new.
+
+        The core's rate-dependent thresholds may have stood in for a lag or a delay, so a
+        search with a new input block also tries the core without them.
+        """
+        if any(BLOCKS[e].side == "input" for e in new):
+            self.betas = {self.free.beta_s or 0.0, 0.0}
+        self.reduce(blocks)
+
+    def reduce(self, blocks: Mapping[str, Sequence[float]]) -> None:
+        """Search in the span of the core's strongest play combinations (and its fit).
+
+        The blocks act on every column of the design; on 20-40 combinations instead of
+        every play the search is several times faster, and the final weights are solved
+        on the whole design again.
+        """
+        beta = self.free.beta_s or 0.0
+        gram = sum(a.T @ a / a.shape[0] for a in self._design(blocks, beta))
+        _, vectors = np.linalg.eigh(np.asarray(gram))
+        keep = [vectors[:, ::-1][:, :REDUCED_COLUMNS]]
+        if self.free.weights is not None:
+            keep.insert(0, self.free.weights[:, None])
+        q, _ = np.linalg.qr(np.hstack(keep))
+        self.basis = q
+        self._designs.clear()
+
+    def _design(self, blocks: Mapping[str, Sequence[float]], beta: float) -> list[FloatArray]:
+        """Per recording: the core's plays on the input blocks' output (a small cache)."""
+        model = self.model
+        key = (beta, *(v for e in model.effects if BLOCKS[e].side == "input" for v in blocks[e]))
+        if key in self._designs:
+            self._designs.move_to_end(key)
+            return self._designs[key]
+        designs = [
+            self.free.design(model._inputs(x, self.rate, blocks), self.rate, beta) for x in self.xs
+        ]
+        if self.basis is not None:
+            designs = [a @ self.basis for a in designs]
+        self._designs[key] = designs
+        if len(self._designs) > 3:
+            self._designs.popitem(last=False)
+        return designs
+
+    def _solve(
+        self, blocks: Mapping[str, Sequence[float]], beta: float
+    ) -> tuple[FloatArray, list[FloatArray], list[FloatArray]]:
+        """Weights, and per recording the design through the output blocks and its offset."""
+        model = self.model
+        outputs = [e for e in model.effects if BLOCKS[e].side == "output"]
+        w = self.free.weights
+        if w is not None and self.basis is not None:
+            w = self.basis.T @ w
+        designs = self._design(blocks, beta)
+        passes = 2 if "tip_dynamics" in outputs else 1
+        for _ in range(passes):
+            mats, offsets = [], []
+            for a in designs:
+                m = np.hstack([a, np.zeros((a.shape[0], 1))])  # last column: running offset
+                for e in outputs:
+                    ref = m[:, :-1] @ w + m[:, -1] if w is not None else m[:, :-1].mean(axis=1)
+                    m = model._blocks[e].apply_columns(m, self.rate, blocks[e], ref)
+                mats.append(m[:, :-1])
+                offsets.append(m[:, -1])
+            w, _ = self.free.solve(mats, [y - c for y, c in zip(self.ys, offsets, strict=True)])
+        assert w is not None
+        return w, mats, offsets
+
+    def _residuals(self, blocks: Mapping[str, Sequence[float]], beta: float) -> FloatArray:
+        w, mats, offsets = self._solve(blocks, beta)
+        return np.concatenate(
+            [
+                (m @ w + c - y) * k
+                for m, c, y, k in zip(mats, offsets, self.ys, self.weights, strict=True)
+            ]
+        )
+
+    def loss(self, blocks: Mapping[str, Sequence[float]]) -> float:
+        # The rate factor is searched with the blocks: the core's own, or none (a lag or a
+        # delay may be what the core's rate-dependent thresholds were standing in for).
+        return min(float(np.sum(self._residuals(blocks, b) ** 2)) for b in self.betas)
+
+    def polish(self, blocks: dict[str, list[float]]) -> tuple[dict[str, list[float]], float]:
+        lo_b, hi_b = self.block_bounds()
+        betas = self.free.betas_s
+        beta_hi = max(*betas, 1e-3)
+        lo, hi = np.concatenate([[0.0], lo_b]), np.concatenate([[beta_hi], hi_b])
+        # The beta that does best with these blocks starts the polish.
+        beta0 = min(self.betas, key=lambda b: float(np.sum(self._residuals(blocks, b) ** 2)))
+        unit = _Unit(lo, hi)
+        v0 = np.concatenate([[beta0], self.pack(blocks)])
+
+        def residuals(u: FloatArray) -> FloatArray:
+            v = unit.from_unit(u)
+            return self._residuals(self.unpack(v[1:]), float(v[0]))
+
+        v_best = v0
+        if self.model.polish_evals > 0 and v0.size > 0:
+            u0 = unit.to_unit(v0)
+            result = optimize.least_squares(
+                residuals,
+                u0,
+                bounds=(0.0, 1.0),
+                method="trf",
+                max_nfev=max(10, self.model.polish_evals // 10),
+                diff_step=1e-3,
+            )
+            if 2 * result.cost <= float(np.sum(residuals(u0) ** 2)):
+                v_best = unit.from_unit(result.x)
+        blocks_best = self.unpack(v_best[1:])
+        beta = float(v_best[0])
+        basis, self.basis = self.basis, None  # the final weights on every play
+        self._designs.clear()
+        w, _, _ = self._solve(blocks_best, beta)
+        self.basis = basis
+        self._designs.clear()
+        self.free.beta_s, self.free.weights = beta, w
+        return blocks_best, float(np.sum(self._residuals_full(blocks_best, beta) ** 2))
+
+    def _residuals_full(self, blocks: Mapping[str, Sequence[float]], beta: float) -> FloatArray:
+        basis, self.basis = self.basis, None
+        self._designs.clear()
+        try:
+            return self._residuals(blocks, beta)
+        finally:
+            self.basis = basis
+            self._designs.clear()
+
+
 class _GreyBoxStream:
-    """Sample-by-sample grey box: each block and the DRDPI core carry their own state."""
+    """Sample-by-sample grey box: each block and the core carry their own state."""
 
     def __init__(self, model: GreyBox) -> None:
         self._model = model
@@ -405,17 +670,13 @@ class _GreyBoxStream:
             for e in m.effects
             if BLOCKS[e].side == "output"
         ]
-        self._state = np.zeros(op.chain_state_size(m._coef))
-        self._x = np.zeros(1)
-        self._y = np.zeros(1)
+        self._core = m.core_.streamer(rate)
 
     def step(self, value: float) -> float:
         x = pa_to_bar(check_finite_step(value, "greybox"))
         for block_step in self._inputs:
             x = block_step(x)
-        self._x[0] = x
-        op.chain_run(self._x, self._model._coef, self._state, self._y)
-        y = float(self._y[0])
+        y = self._core(x)
         for block_step in self._outputs:
             y = block_step(y)
         return float(deg_to_rad(y))

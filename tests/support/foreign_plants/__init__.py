@@ -1,0 +1,26 @@
+"""Foreign plants: simulated catheters written apart from ``catheter_models.plant``.
+
+Test support only: the lab must never import this package (``tests/catheter_models/lab/
+test_foreign_plants.py`` checks). Each plant module has its own hysteresis law and its own
+physics for every effect it can hide; :mod:`.base` holds the contract they share and
+:mod:`.cases` the training / held-out recordings a case is scored on.
+"""
+
+from __future__ import annotations
+
+from .base import CATALOGUE, OUTSIDE, RANGES, Effect, ForeignPlant
+
+__all__ = ["CATALOGUE", "OUTSIDE", "PLANTS", "RANGES", "Effect", "ForeignPlant"]
+
+
+def _plants() -> dict[str, type[ForeignPlant]]:
+    from .boucwen import BoucWenPlant
+    from .maxwell_slip import MaxwellSlipPlant
+
+    return {p.name: p for p in (MaxwellSlipPlant, BoucWenPlant)}
+
+
+def __getattr__(name: str) -> object:
+    if name == "PLANTS":
+        return _plants()
+    raise AttributeError(name)
