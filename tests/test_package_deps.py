@@ -45,6 +45,9 @@ ROSDEP_KEYS: dict[str, str] = {
     "yaml": "python3-yaml",
     "tqdm": "python3-tqdm",
     "sklearn": "python3-sklearn",
+    # threadpoolctl is scikit-learn's own dependency (Debian's python3-sklearn depends on
+    # python3-threadpoolctl), so the sklearn key brings it.
+    "threadpoolctl": "python3-sklearn",
     "serial": "python3-serial",
     "can": "python3-can",
     "rosbags": "python3-rosbags-pip",

@@ -18,6 +18,11 @@
                                           or "adequate"), with the residual tests
     catheter-lab add EFFECT MODEL -o NEW --train BAG...
                                           add an effect block and refit (history kept)
+    catheter-lab core NAME MODEL -o NEW --train BAG...
+                                          change the hysteresis core, keep the blocks
+    catheter-lab explain MODEL --train BAG... --test BAG... -o DIR
+                                          the whole loop: diagnose, make the best change,
+                                          again, until nothing earns its place
     catheter-lab history [--lab DIR]      model versions and the error across them
 
 The lab's guide: docs/lab.md.
@@ -260,7 +265,14 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     model = load_model(args.model)
     train = recordings_from_bags(args.train, rate_hz=model.fitted_rate_hz)
     test = recordings_from_bags(args.test, rate_hz=model.fitted_rate_hz)
-    result = diagnose(model, train, test, effects=args.effect or None)
+    result = diagnose(
+        model,
+        train,
+        test,
+        effects=args.effect or None,
+        cores=args.core,
+        reference=not args.no_reference,
+    )
     print(result.text())
     if args.output is not None:
         args.output.mkdir(parents=True, exist_ok=True)
@@ -274,45 +286,108 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_add(args: argparse.Namespace) -> int:
-    """Add an effect block to a grey-box (or DRDPI) model, refit it, record both versions."""
-    from catheter_models.lab import history
+def _greybox_of(model_dir: Path) -> Any:
+    """The grey-box model in ``model_dir`` (a DRDPI is the default chain); refused otherwise."""
     from catheter_models.lab.greybox import GreyBox
     from catheter_models.models import load_model
-    from catheter_models.models.data import recordings_from_bags
     from catheter_models.models.drdpi import DRDPI
 
-    if args.output.exists():
-        raise CatheterError(f"{args.output} exists; choose a new model directory")
-    model = load_model(args.model)
+    model = load_model(model_dir)
     if isinstance(model, DRDPI):
         model = GreyBox.from_drdpi(model)
     if not isinstance(model, GreyBox):
         raise CatheterError(
-            f"{args.model} holds a {model.kind} model: effects are added to grey-box "
-            "models (or a DRDPI, the default chain)"
+            f"{model_dir} holds a {model.kind} model: effects and cores are changed on "
+            "grey-box models (or a DRDPI, the default chain)"
         )
+    return model
+
+
+def _change(args: argparse.Namespace, change: str, make: Any) -> int:
+    """Refit ``make(model)``, save it, record parent and child in the lab's history."""
+    from catheter_models.lab import history
+    from catheter_models.models.data import recordings_from_bags
+
+    if args.output.exists():
+        raise CatheterError(f"{args.output} exists; choose a new model directory")
+    model = _greybox_of(args.model)
     train = recordings_from_bags(args.train, rate_hz=model.fitted_rate_hz)
     test = recordings_from_bags(args.test or [], rate_hz=model.fitted_rate_hz)
-    new = model.with_effect(args.effect).fit(train, progress=not args.no_progress)
+    new = make(model).fit(train, progress=not args.no_progress)
     new.save(args.output, training=train)
-    print(f"{' -> '.join(new.chain)}: {args.effect} = {new.block_values()[args.effect]}")
+    print(f"{' -> '.join(new.chain)}: {new.block_values() or new.core_name}")
     print(f"model: {args.output}")
     versions = history.load_history(args.lab)
     parent = history.find(versions, args.model)
     if parent is None:
         parent = history.record(args.lab, args.model, model, train=train, test=test)
     child = history.record(
-        args.lab,
-        args.output,
-        new,
-        train=train,
-        test=test,
-        added=args.effect,
-        parent=parent.version,
+        args.lab, args.output, new, train=train, test=test, added=change, parent=parent.version
     )
     print(history.history_text(history.load_history(args.lab)))
     print(f"history: {args.lab / history.HISTORY_FILE} (version {child.version})")
+    return 0
+
+
+def _cmd_add(args: argparse.Namespace) -> int:
+    """Add an effect block to a grey-box (or DRDPI) model, refit it, record both versions."""
+    return _change(args, args.effect, lambda m: m.with_effect(args.effect))
+
+
+def _cmd_core(args: argparse.Namespace) -> int:
+    """Change a grey-box (or DRDPI) model's core, refit it, record both versions."""
+    return _change(args, f"core:{args.name}", lambda m: m.with_core(args.name))
+
+
+def _cmd_explain(args: argparse.Namespace) -> int:
+    """The whole loop, each version saved and recorded, the history plotted with floors."""
+    from catheter_models.lab import history
+    from catheter_models.lab.diagnose import plot_diagnosis
+    from catheter_models.lab.explain import Step, explain
+    from catheter_models.models import load_model
+    from catheter_models.models.data import recordings_from_bags
+
+    if args.output.exists():
+        raise CatheterError(f"{args.output} exists; choose a new directory")
+    model = load_model(args.model)
+    train = recordings_from_bags(args.train, rate_hz=model.fitted_rate_hz)
+    test = recordings_from_bags(args.test, rate_hz=model.fitted_rate_hz)
+    args.output.mkdir(parents=True)
+    parent: list[int | None] = [None]
+
+    def on_step(step: Step) -> None:
+        d = step.diagnosis
+        where = args.model
+        if step.change is not None:
+            where = args.output / f"step{sum(1 for _ in args.output.glob('step*')) + 1}"
+            step.model.save(where, training=train)
+        version = history.record(
+            args.output,
+            where,
+            step.model,
+            train=train,
+            test=test,
+            added=step.change,
+            parent=parent[0],
+            floors=(d.floors.noise_deg, d.floors.reference_deg),
+        )
+        parent[0] = version.version
+        print(
+            f"step {version.version - 1}: {' -> '.join(d.chain)}: held-out "
+            f"{d.rmse_test_deg:.3f} deg; verdict {d.verdict}",
+            flush=True,
+        )
+
+    result = explain(model, train, test, max_steps=args.max_steps, on_step=on_step)
+    print()
+    print(result.text())
+    (args.output / "explanation.json").write_text(
+        json.dumps(result.to_dict(), indent=2, default=float) + "\n"
+    )
+    history.plot_history(history.load_history(args.output), args.output / "history.png")
+    if result.final.candidates:
+        plot_diagnosis(result.final, args.output / "diagnosis.png")
+    print(f"versions, history.png, diagnosis.png and explanation.json: {args.output}")
     return 0
 
 
@@ -455,8 +530,40 @@ def build_parser() -> argparse.ArgumentParser:
     diag.add_argument(
         "--effect", action="append", help="test only this effect (repeatable; default: all)"
     )
+    diag.add_argument(
+        "--core",
+        action="append",
+        help="try only this core change (repeatable; default: every other core)",
+    )
+    diag.add_argument(
+        "--no-reference",
+        action="store_true",
+        help="skip the black-box reference (the noise floor alone judges 'adequate')",
+    )
     diag.add_argument("-o", "--output", type=Path, default=None, help="figures and JSON here")
     diag.set_defaults(func=_cmd_diagnose)
+
+    core = sub.add_parser("core", help="change a grey-box model's hysteresis core and refit")
+    core.add_argument("name", help="the new core (drdpi, free_pi, boucwen)")
+    core.add_argument("model", type=Path, help="grey-box or DRDPI model directory")
+    core.add_argument("-o", "--output", type=Path, required=True, help="new model directory")
+    core.add_argument("--train", nargs="+", type=Path, required=True, help="training bags")
+    core.add_argument("--test", nargs="+", type=Path, help="held-out bags scored in the history")
+    core.add_argument("--lab", type=Path, default=Path("lab"), help="the lab's directory (lab)")
+    core.add_argument("--no-progress", action="store_true")
+    core.set_defaults(func=_cmd_core)
+
+    expl = sub.add_parser(
+        "explain", help="diagnose, make the best change, repeat until nothing helps"
+    )
+    expl.add_argument("model", type=Path, help="model directory to start from")
+    expl.add_argument("--train", nargs="+", type=Path, required=True, help="training bags")
+    expl.add_argument("--test", nargs="+", type=Path, required=True, help="held-out bags")
+    expl.add_argument(
+        "-o", "--output", type=Path, required=True, help="new directory: versions, figures"
+    )
+    expl.add_argument("--max-steps", type=int, default=4, help="changes at most (4)")
+    expl.set_defaults(func=_cmd_explain)
 
     add = sub.add_parser("add", help="add an effect block to a grey-box model and refit")
     add.add_argument("effect", help="catalogue effect, e.g. pneumatic_lag (catheter-lab effects)")

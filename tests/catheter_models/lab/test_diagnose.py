@@ -63,7 +63,8 @@ def test_a_hidden_effect_is_ranked_first(
     config = PlantConfig.thesis_rig(seed=1).with_effect(effect, enabled=True, **settings)
     train, test = _data(config)
     model = GreyBox().fit(train, progress=False)
-    result = diagnose(model, train, test)
+    # The thesis's core, blocks only (core changes are tested on the foreign plants).
+    result = diagnose(model, train, test, cores=[], reference=False)
     print(result.text())
     best = result.candidates[0]
     assert best.effect == effect, result.text()
@@ -81,30 +82,36 @@ def test_two_hidden_effects_are_both_in_the_top_three() -> None:
         .with_effect("drift", enabled=True, rate_rad_per_s=0.0025)
     )
     train, test = _data(config)
-    result = diagnose(GreyBox().fit(train, progress=False), train, test)
+    result = diagnose(GreyBox().fit(train, progress=False), train, test, cores=[], reference=False)
     print(result.text())
     top3 = [c.effect for c in result.candidates[:3]]
     assert {"pneumatic_lag", "drift"} <= set(top3), result.text()
     assert all(c.significant for c in result.candidates[:2])
 
 
-def test_nothing_hidden_is_adequate() -> None:
+def test_nothing_hidden_names_no_effect_and_calls_the_drdpi_law_the_miss() -> None:
     train, test = _data(PlantConfig.thesis_rig(seed=1))
     model = GreyBox().fit(train, progress=False)
     result = diagnose(model, train, test)
     print(result.text())
-    assert result.verdict == "adequate", result.text()
-    assert not result.significant
-    assert "adequate" in result.text()
+    # The DRDPI's 0.8 deg is 20x the sensor's noise: never "adequate". The largest miss is
+    # its loop shape, which the free-weight core fixes; no catalogue effect is invented.
+    assert result.verdict == "core free_pi", result.text()
+    assert result.floors.noise_deg < 0.1 * result.rmse_test_deg
+    blocks = [c for c in result.candidates if not c.is_core]
     # Every catalogue effect was tried (none is untestable on the lab's excitation).
-    assert {c.effect for c in result.candidates} == {
+    assert {c.effect for c in blocks} == {
         "transport_delay",
         "pneumatic_lag",
         "creep",
         "tip_dynamics",
         "drift",
     }
-    assert all(c.measured_reduction < 0.10 for c in result.candidates)
+    assert not any(c.significant for c in blocks), result.text()
+    # Once the core is changed, nothing is left to add: adequate, near the floors.
+    after = diagnose(result.best.model, train, test, cores=[])
+    print(after.text())
+    assert after.verdict == "adequate", after.text()
 
 
 def test_too_little_excitation_is_said_not_guessed() -> None:
@@ -112,7 +119,7 @@ def test_too_little_excitation_is_said_not_guessed() -> None:
     # each: no plateau, so creep cannot be identified, and too short for a drift.
     train = simulate_recordings(["train_nonzero_f0.6", "train_nonzero_f0.8"])
     model = GreyBox(budget={"max_generations": 5, "wall_time_s": 5}).fit(train, progress=False)
-    result = diagnose(model, train, train, effects=["creep", "drift"])
+    result = diagnose(model, train, train, effects=["creep", "drift"], cores=[])
     assert "creep" in result.untestable and "plateau" in result.untestable["creep"]
     assert "drift" in result.untestable and "30 s" in result.untestable["drift"]
     assert "not testable here" in result.text()

@@ -27,7 +27,7 @@ def test_a_learned_model_gets_the_residual_tests(tmp_path: Path, capsys) -> None
     out = capsys.readouterr().out
     assert code == 0, out
     assert "residual tests beyond their 95 % band" in out
-    assert "has no physical blocks to add: residual tests only" in out
+    assert "has no physical blocks to add: floors and residual tests only" in out
     assert (tmp_path / "residual_tests.png").is_file() and (tmp_path / "diagnosis.json").is_file()
 
 

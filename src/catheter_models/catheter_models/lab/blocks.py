@@ -49,6 +49,9 @@ class BlockParam:
     doc: str
     display_scale: float = 1.0
     display_unit: str = ""
+    grid_points: int = 0
+    """Points of the identification's search grid over the range (0: the grey box's default
+    for a block of this many parameters)."""
 
     def display(self, value: float) -> str:
         """The value as a person reads it (e.g. ms, Hz, deg/min)."""
@@ -339,8 +342,25 @@ class TipDynamics(Block):
     effect = "tip_dynamics"
     side: ClassVar[Side] = "output"
     params = (
-        BlockParam("natural_frequency_hz", "Hz", 1.0, 40.0, 10.0, "undamped natural frequency"),
-        BlockParam("damping_ratio", "1", 0.02, 1.5, 0.5, "damping ratio with the tip straight"),
+        # A resonance is narrow: the frequency grid must be fine enough to land in its basin.
+        BlockParam(
+            "natural_frequency_hz",
+            "Hz",
+            1.0,
+            40.0,
+            10.0,
+            "undamped natural frequency",
+            grid_points=12,
+        ),
+        BlockParam(
+            "damping_ratio",
+            "1",
+            0.02,
+            1.5,
+            0.5,
+            "damping ratio with the tip straight",
+            grid_points=3,
+        ),
         BlockParam(
             "damping_per_rad",
             "1/rad",
@@ -348,6 +368,7 @@ class TipDynamics(Block):
             20.0,
             0.5,
             "growth of the damping ratio per radian of bend (wire friction grows with pull)",
+            grid_points=1,
         ),
     )
     primary = "natural_frequency_hz"

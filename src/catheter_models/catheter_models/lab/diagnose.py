@@ -1,52 +1,91 @@
-"""Diagnose what physics a model lacks: residual tests, then a refit per catalogue effect.
+"""Diagnose what physics a model lacks: floors, residual tests, then a refit per change.
 
-For a grey-box model (or a DRDPI, taken as the default chain), every effect of
-docs/effects.md that the chain lacks is added in turn, identified on the training data
-(warm-started, seconds each) and scored on held-out data. Effects are ranked by the held-out
-error they remove; one counts only if it removes at least ``min_reduction`` of it, so data
-that a model already explains gets the verdict "adequate" and no effect is invented. Each
-candidate carries the residual test that points at it, as its evidence, and its identified
-parameter in physical units. Learned models (LSTM, c-LSTM, SVR) get the residual tests: they
-have no blocks to add.
+For a grey-box model (or a DRDPI, taken as the default chain) the diagnosis tries every
+change the lab knows, each refitted on the training data and scored on held-out data:
+
+* **another hysteresis core** (:mod:`.cores`) with the same blocks: the core's law may be
+  the largest miss, and a wrong core absorbs the add-on effects it half mimics;
+* **every catalogue effect** the chain lacks, as a block (:mod:`.blocks`), searched over its
+  whole range with a linear core re-solved at every point (:mod:`.greybox`).
+
+Changes are ranked by the held-out error they remove. One is **significant** only if it
+removes at least ``min_reduction`` of the held-out error (and some on training data), and,
+for an effect, only if it earns its place: it helps where its effect shows (the regime of
+:data:`EFFECT_REGIMES`) and its parameter is not pinned to the end of its range (a block at
+its limit is standing in for something else).
+
+The verdict is judged against two floors measured on the same data (:mod:`.floors`): the
+sensor's noise, and a black-box reference fitted on the same split. **Adequate** only when
+the model is near them (within :data:`NEAR_NOISE` of the noise floor, or no worse than
+:data:`NEAR_REFERENCE` times the reference); otherwise, with no significant change,
+**unexplained**: how far above the floors, in which regimes, with which residual signature.
+The lab never names an effect that does not earn its place on held-out data.
+
+Learned models (LSTM, c-LSTM, SVR) get the floors and the residual tests: they have no blocks.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Final
 
 import numpy as np
 
 from catheter_models.errors import ParameterError
 from catheter_models.lab.blocks import BLOCKS, block
+from catheter_models.lab.cores import CORES, one_blas_thread
+from catheter_models.lab.floors import FilterBankReference, noise_std_deg
 from catheter_models.lab.greybox import GreyBox
 from catheter_models.lab.residuals import ResidualReport, residual_tests
+from catheter_models.metrics import classify_regimes
 from catheter_models.models.base import FloatArray, Model, Recording
 from catheter_models.models.drdpi import DRDPI
 from catheter_models.models.evaluate import pooled_rmse
 from catheter_models.units import pa_to_bar, rad_to_deg
 
-MIN_REDUCTION = 0.10
-"""Least share of the held-out RMSE an effect must remove to be reported."""
+MIN_REDUCTION: Final = 0.10
+"""Least share of the held-out RMSE a change must remove to be reported."""
 
-EVIDENCE_TEST = {
+NEAR_NOISE: Final = 3.0
+"""A model within this multiple of the noise floor is adequate."""
+
+NEAR_REFERENCE: Final = 1.1
+"""A model within this multiple of the black-box reference's error is adequate: what is left
+is not learnable from these data."""
+
+EVIDENCE_TEST: Final = {
     "pneumatic_lag": "rate_cross",
     "transport_delay": "input_cross",
     "creep": "autocorrelation",
     "tip_dynamics": "abs_rate_e",
     "drift": "time_trend",
 }
-"""The residual test whose signature each effect leaves (docs/effects.md, 'where the
-residual shows it')."""
+"""The residual test whose signature each effect leaves (docs/lab.md, 'where it shows')."""
+
+EFFECT_REGIMES: Final = {
+    "pneumatic_lag": ("fast_motion", "loading", "unloading"),
+    "transport_delay": ("fast_motion", "loading", "unloading"),
+    "creep": ("plateau",),
+    "tip_dynamics": ("fast_motion", "peak", "valley"),
+    "drift": ("plateau", "valley", "deadband"),
+}
+"""The regimes where each effect shows: an effect must help there to earn its place."""
+
+REGIME_SHARE: Final = 0.5
+"""An effect must remove, in its regimes, at least this share of what it removes overall."""
+
+CORE_CHANGE: Final = "core"
 
 
 @dataclass
 class Candidate:
-    """One catalogue effect, added and refitted."""
+    """One change (a catalogue effect added, or another core), refitted and scored."""
 
     effect: str
+    """The effect's name, or ``core:<name>`` for a core change."""
     parameter: str
     value_si: float
     display: str
@@ -56,20 +95,63 @@ class Candidate:
     measured_reduction: float
     evidence: str
     significant: bool
+    regime_reduction: float = float("nan")
+    """Share of the held-out error removed in the effect's own regimes."""
+    doubts: list[str] = field(default_factory=list)
+    """Why a change that removes error does not earn its place (empty when it does)."""
     model: GreyBox | None = field(default=None, repr=False)
+
+    @property
+    def is_core(self) -> bool:
+        """Whether this is a core change rather than an added effect."""
+        return self.effect.startswith(f"{CORE_CHANGE}:")
+
+    @property
+    def name(self) -> str:
+        """What a person types: the effect, or the core's name."""
+        return self.effect.split(":", 1)[1] if self.is_core else self.effect
 
     def line(self, rank: int) -> str:
         """The ranked list's line a person reads."""
-        return (
-            f"{rank}. {self.effect:<16} {self.parameter} = {self.display:<12} "
-            f"held-out RMSE -{100 * self.measured_reduction:5.1f} % "
-            f"(expected -{100 * self.expected_reduction:5.1f} % from training)  "
-            f"evidence: {self.evidence}"
+        what = f"{self.parameter} = {self.display}"
+        text = (
+            f"{rank}. {self.effect:<16} {what:<34} held-out RMSE "
+            f"-{100 * self.measured_reduction:5.1f} % "
+            f"(expected -{100 * self.expected_reduction:5.1f} % from training)"
         )
+        if self.evidence:
+            text += f"  evidence: {self.evidence}"
+        if self.doubts:
+            text += f"  [not counted: {'; '.join(self.doubts)}]"
+        return text
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready, without the model."""
         return {k: v for k, v in self.__dict__.items() if k != "model"}
+
+
+@dataclass
+class Floors:
+    """What the held-out error is judged against [deg]."""
+
+    noise_deg: float
+    reference_deg: float
+    reference: str = "filter-bank black box"
+
+    def near(self, rmse_deg: float) -> bool:
+        """Whether ``rmse_deg`` is near the floors (see module)."""
+        if math.isfinite(self.noise_deg) and rmse_deg <= NEAR_NOISE * self.noise_deg:
+            return True
+        return math.isfinite(self.reference_deg) and rmse_deg <= NEAR_REFERENCE * (
+            self.reference_deg
+        )
+
+    def text(self, rmse_deg: float) -> str:
+        """``0.46 deg = 7.5 x the noise floor (0.061 deg); black box 0.41 deg``."""
+        parts = [f"noise floor {self.noise_deg:.3f} deg (model {rmse_deg / self.noise_deg:.1f} x)"]
+        if math.isfinite(self.reference_deg):
+            parts.append(f"{self.reference} {self.reference_deg:.3f} deg")
+        return "; ".join(parts)
 
 
 @dataclass
@@ -83,17 +165,39 @@ class Diagnosis:
     candidates: list[Candidate]
     untestable: dict[str, str]
     residual_report: ResidualReport
+    floors: Floors = field(default_factory=lambda: Floors(float("nan"), float("nan")))
+    regimes_deg: dict[str, float] = field(default_factory=dict)
+    signature: list[str] = field(default_factory=list)
     note: str = ""
 
     @property
     def significant(self) -> list[Candidate]:
-        """Candidates that remove at least ``MIN_REDUCTION`` of the held-out error, best first."""
+        """Changes that earn their place, best first."""
         return [c for c in self.candidates if c.significant]
 
     @property
+    def best(self) -> Candidate | None:
+        """The change to make next, if any."""
+        return self.significant[0] if self.significant else None
+
+    @property
+    def adequate(self) -> bool:
+        """Near the floors with nothing left that earns its place."""
+        return self.best is None and self.floors.near(self.rmse_test_deg)
+
+    @property
     def verdict(self) -> str:
-        """'adequate', or the effect to add next."""
-        return "adequate" if not self.significant else f"add {self.significant[0].effect}"
+        """``add <effect>``, ``core <name>``, ``adequate`` or ``unexplained``."""
+        best = self.best
+        if best is not None:
+            return f"core {best.name}" if best.is_core else f"add {best.effect}"
+        if not math.isfinite(self.rmse_test_deg):
+            return "residual tests only"  # an inverse model: its errors are not in degrees
+        return "adequate" if self.floors.near(self.rmse_test_deg) else "unexplained"
+
+    def _worst_regimes(self, n: int = 3) -> str:
+        worst = sorted(self.regimes_deg.items(), key=lambda kv: kv[1], reverse=True)[:n]
+        return ", ".join(f"{k} {v:.3f} deg" for k, v in worst)
 
     def text(self) -> str:
         """The report a person reads in the terminal."""
@@ -102,6 +206,8 @@ class Diagnosis:
             f"  RMSE {self.rmse_train_deg:.3f} deg on training data, "
             f"{self.rmse_test_deg:.3f} deg held out",
         ]
+        if math.isfinite(self.rmse_test_deg):
+            lines.append(f"  floors: {self.floors.text(self.rmse_test_deg)}")
         sig = self.residual_report.significant()
         lines.append(
             "  residual tests beyond their 95 % band: " + (", ".join(sig) if sig else "none")
@@ -109,22 +215,39 @@ class Diagnosis:
         if self.note:
             lines.append(f"  {self.note}")
         if self.candidates:
-            lines.append("  effects the model lacks, ranked by the held-out error they remove:")
+            lines.append("  changes, ranked by the held-out error they remove:")
             lines += ["    " + c.line(i) for i, c in enumerate(self.candidates, start=1)]
         for effect, why in self.untestable.items():
             lines.append(f"    {effect}: not testable here: {why}")
-        if self.candidates:
-            if self.significant:
-                best = self.significant[0]
-                lines.append(
-                    f"  verdict: {best.effect} is missing ({best.parameter} = {best.display}); "
-                    f"add it: catheter-lab add {best.effect} MODEL -o NEW --train ..."
-                )
-            else:
-                lines.append(
-                    f"  verdict: adequate: no catalogue effect removes {100 * MIN_REDUCTION:.0f} % "
-                    "of the held-out error"
-                )
+        verdict = self.verdict
+        best = self.best
+        if best is not None and best.is_core:
+            lines.append(
+                f"  verdict: the core's law is the largest miss: {best.name} removes "
+                f"{100 * best.measured_reduction:.0f} %; change it: catheter-lab core "
+                f"{best.name} MODEL -o NEW --train ..."
+            )
+        elif best is not None:
+            lines.append(
+                f"  verdict: {best.effect} is missing ({best.parameter} = {best.display}); "
+                f"add it: catheter-lab add {best.effect} MODEL -o NEW --train ..."
+            )
+        elif verdict == "residual tests only":
+            pass
+        elif verdict == "adequate":
+            lines.append(
+                f"  verdict: adequate: near the floors ({self.floors.text(self.rmse_test_deg)}),"
+                f" and no change removes {100 * MIN_REDUCTION:.0f} % of the held-out error"
+            )
+        else:
+            lines.append(
+                f"  verdict: unexplained: {self.floors.text(self.rmse_test_deg)}; no catalogue "
+                "change earns its place"
+            )
+            if self.regimes_deg:
+                lines.append(f"    worst regimes: {self._worst_regimes()}")
+            if self.signature:
+                lines.append(f"    residual signature: {'; '.join(self.signature)}")
         return "\n".join(lines)
 
     def to_dict(self) -> dict[str, Any]:
@@ -135,6 +258,13 @@ class Diagnosis:
             "rmse_train_deg": self.rmse_train_deg,
             "rmse_test_deg": self.rmse_test_deg,
             "verdict": self.verdict,
+            "floors": {
+                "noise_deg": self.floors.noise_deg,
+                "reference_deg": self.floors.reference_deg,
+                "reference": self.floors.reference,
+            },
+            "regimes_deg": self.regimes_deg,
+            "signature": self.signature,
             "candidates": [c.to_dict() for c in self.candidates],
             "untestable": self.untestable,
             "residual_tests": self.residual_report.to_dict(),
@@ -146,81 +276,245 @@ def _rmse_deg(model: Model, recordings: Sequence[Recording]) -> float:
     return float(rad_to_deg(pooled_rmse(model, recordings)))
 
 
-def _residual_report(model: Model, recordings: Sequence[Recording]) -> tuple[ResidualReport, float]:
-    """The residual tests on ``recordings`` and the pooled RMSE of the same residual (SI)."""
-    residual: list[FloatArray] = []
+def _residuals(model: Model, recordings: Sequence[Recording]) -> list[FloatArray]:
+    out = []
+    for r in recordings:
+        x, y = r.io(model.direction)
+        out.append(np.asarray(model.predict(x) - y, dtype=float))
+    return out
+
+
+def _residual_report(
+    recordings: Sequence[Recording], residual: Sequence[FloatArray], direction: str
+) -> ResidualReport:
+    """The residual tests on ``recordings``' residuals (inputs pooled by recording)."""
     inputs: list[FloatArray] = []
     segments: list[tuple[int, int]] = []
     start = 0
     for r in recordings:
-        x, y = r.io(model.direction)
-        residual.append(np.asarray(model.predict(x) - y, dtype=float))
+        x, _ = r.io(direction)  # type: ignore[arg-type]
         inputs.append(np.asarray(x, dtype=float))
         segments.append((start, start + x.size))
         start += x.size
-    pooled = np.concatenate(residual)
-    report = residual_tests(
-        pooled, np.concatenate(inputs), recordings[0].rate_hz, segments=segments
+    return residual_tests(
+        np.concatenate(residual), np.concatenate(inputs), recordings[0].rate_hz, segments=segments
     )
-    return report, float(np.sqrt(np.mean(pooled**2)))
 
 
+class _Regimes:
+    """The held-out recordings' regime masks, computed once, and RMSE per regime."""
+
+    def __init__(self, recordings: Sequence[Recording]) -> None:
+        self.masks: dict[str, FloatArray] = {}
+        parts: dict[str, list[FloatArray]] = {}
+        for r in recordings:
+            t = np.arange(r.pressure_pa.size) / r.rate_hz
+            for name, mask in classify_regimes(t, r.pressure_pa, r.angle_rad).items():
+                parts.setdefault(name, []).append(np.asarray(mask, dtype=bool))
+        self.masks = {k: np.concatenate(v) for k, v in parts.items()}
+
+    def rmse_deg(self, residual: Sequence[FloatArray], names: Sequence[str]) -> float:
+        pooled = np.concatenate(residual)
+        mask = np.zeros(pooled.size, dtype=bool)
+        for n in names:
+            if n in self.masks:
+                mask |= self.masks[n]
+        if mask.sum() < 25:
+            return float("nan")
+        return float(rad_to_deg(np.sqrt(np.mean(pooled[mask] ** 2))))
+
+    def table(self, residual: Sequence[FloatArray]) -> dict[str, float]:
+        return {k: v for k in self.masks if math.isfinite(v := self.rmse_deg(residual, [k]))}
+
+
+def _signature(
+    residual: Sequence[FloatArray],
+    regimes: _Regimes,
+    report: ResidualReport,
+    noise_deg: float,
+) -> list[str]:
+    """The residual's shape in words a person checks against the plots."""
+    out: list[str] = []
+    pooled = rad_to_deg(np.concatenate(residual))
+    plateau = regimes.masks.get("plateau")
+    if plateau is not None and plateau.any():
+        # On each plateau, how far the residual moves from its start to its end.
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], plateau.astype(int), [0]])))
+        moves = [
+            pooled[b - 1] - pooled[a]
+            for a, b in zip(edges[::2], edges[1::2], strict=True)
+            if b - a > 25
+        ]
+        if moves:
+            typical = float(np.median(np.abs(moves)))
+            if typical > 3.0 * noise_deg:
+                out.append(
+                    f"keeps moving on plateaus (median {typical:.2f} deg from a plateau's "
+                    "start to its end): slow dynamics the model lacks"
+                )
+    labels = {
+        "rate_cross": "follows the pressure's rate (a lag, or rate dependence of another form)",
+        "input_cross": "follows the pressure itself (a gain or delay error)",
+        "time_trend": "trends with time within a recording (a drift of offset or gain)",
+        "u2_e": "depends on the pressure's level (the static curve's shape)",
+        "abs_rate_e": "grows with the speed of the pressure (fast-motion dynamics)",
+    }
+    for name in report.significant():
+        if name in labels:
+            out.append(f"{labels[name]}: {report.by_name(name).evidence()}")
+    return out
+
+
+def _changes(
+    model: GreyBox, effects: Sequence[str] | None, cores: Sequence[str] | None
+) -> tuple[list[str], list[str]]:
+    """The effects and cores to try; unknown or present names are refused before any fit."""
+    wanted = list(effects) if effects is not None else [e for e in BLOCKS if e not in model.effects]
+    for e in wanted:
+        block(e)
+        if e in model.effects:
+            raise ParameterError(f"the model has {e!r} already: {' -> '.join(model.chain)}")
+    other_cores = list(cores) if cores is not None else [c for c in CORES if c != model.core_name]
+    for c in other_cores:
+        if c not in CORES:
+            raise ParameterError(f"unknown core {c!r}; known cores: {', '.join(CORES)}")
+    return wanted, other_cores
+
+
+def _pinned(model: GreyBox, effect: str) -> list[str]:
+    """Parameters of ``effect``'s block that ended at a bound of their range."""
+    pinned = []
+    for p, v in zip(BLOCKS[effect].params, model.blocks_[effect], strict=True):
+        span = p.high - p.low
+        if effect == "drift" or (p.low == 0.0 and v <= p.low + 1e-6 * span):
+            continue  # a drift's range is symmetric; a zero share or delay is a plain answer
+        if p.low > 0.0 and p.high / p.low > 10.0:
+            near = min(math.log(v / p.low), math.log(p.high / v)) < 0.01 * math.log(p.high / p.low)
+        else:
+            near = min(v - p.low, p.high - v) < 0.01 * span
+        if near:
+            pinned.append(f"{p.name} at the end of its range ({p.display(v)})")
+    return pinned
+
+
+@one_blas_thread
 def diagnose(
     model: Model,
     train: Sequence[Recording],
     test: Sequence[Recording],
     *,
     effects: Sequence[str] | None = None,
+    cores: Sequence[str] | None = None,
+    reference: bool = True,
     min_reduction: float = MIN_REDUCTION,
     progress: bool = False,
 ) -> Diagnosis:
-    """Residual tests on ``test``; for a grey box, a refit and score per missing effect.
+    """Floors and residual tests on ``test``; for a grey box, a refit and score per change.
+
+    Args:
+        model: A fitted model (a DRDPI is taken as the default grey-box chain).
+        train: Recordings every change is refitted on.
+        test: Held-out recordings every change is scored on.
+        effects: Catalogue effects to try (default: every one the chain lacks).
+        cores: Cores to try instead of the chain's (default: every other one; ``[]``: none).
+        reference: Fit the black-box reference (seconds); without it, only the noise floor.
+        min_reduction: Least share of the held-out error a change must remove.
+        progress: Show the core's search progress.
 
     Raises:
-        ParameterError: An unknown effect name, or no training / held-out data.
+        ParameterError: An unknown effect or core, or no training / held-out data.
     """
     if not train or not test:
         raise ParameterError("diagnose needs training recordings and held-out test recordings")
-    report, rmse_test_si = _residual_report(model, test)
+    wanted: list[str] = []
+    other_cores: list[str] = []
+    if isinstance(model, GreyBox | DRDPI):
+        chain = GreyBox.from_drdpi(model) if isinstance(model, DRDPI) else model
+        wanted, other_cores = _changes(chain, effects, cores)
+    noise = noise_std_deg(test)
+    forward = model.direction == "forward"
+    reference_deg = (
+        FilterBankReference().fit(train).rmse_deg(test) if reference and forward else math.nan
+    )
+    floors = Floors(noise, reference_deg)
+    residual = _residuals(model, test)
+    report = _residual_report(test, residual, model.direction)
+    rmse_test = float(rad_to_deg(np.sqrt(np.mean(np.concatenate(residual) ** 2))))
+    regimes = _Regimes(test)
+    regimes_deg = regimes.table(residual) if forward else {}
+    signature = _signature(residual, regimes, report, noise) if forward else []
     if isinstance(model, DRDPI):
         model = GreyBox.from_drdpi(model)
     if not isinstance(model, GreyBox):
-        forward = model.direction == "forward"
         return Diagnosis(
             model_kind=model.kind,
             chain=[model.kind],
             rmse_train_deg=_rmse_deg(model, train) if forward else float("nan"),
-            rmse_test_deg=float(rad_to_deg(rmse_test_si)) if forward else float("nan"),
+            rmse_test_deg=rmse_test if forward else float("nan"),
             candidates=[],
             untestable={},
             residual_report=report,
+            floors=floors,
+            regimes_deg=regimes_deg,
+            signature=signature,
             note=(
-                f"a {model.kind} model has no physical blocks to add: residual tests only "
-                "(a grey-box model of the same data can be diagnosed effect by effect)"
+                f"a {model.kind} model has no physical blocks to add: floors and residual "
+                "tests only (a grey-box model of the same data can be diagnosed effect by "
+                "effect)"
             ),
         )
-    wanted = list(effects) if effects is not None else [e for e in BLOCKS if e not in model.effects]
-    for e in wanted:  # unknown or present names fail here, before any fitting
-        block(e)
-        if e in model.effects:
-            raise ParameterError(f"the model has {e!r} already: {' -> '.join(model.chain)}")
-    base_train, base_test = _rmse_deg(model, train), float(rad_to_deg(rmse_test_si))
+    base_train = _rmse_deg(model, train)
     rate = train[0].rate_hz
     xs = [pa_to_bar(r.pressure_pa) for r in train]
     candidates: list[Candidate] = []
     untestable: dict[str, str] = {}
+
+    def scored(change: str, fitted: GreyBox) -> tuple[float, float, float, float]:
+        rmse_train, rmse_test_new = _rmse_deg(fitted, train), _rmse_deg(fitted, test)
+        return (
+            rmse_train,
+            rmse_test_new,
+            (base_train - rmse_train) / base_train,
+            (rmse_test - rmse_test_new) / rmse_test,
+        )
+
+    for c in other_cores:
+        fitted = model.with_core(c).fit(train, progress=progress)
+        rmse_train, rmse_test_new, expected, measured = scored(c, fitted)
+        candidates.append(
+            Candidate(
+                effect=f"{CORE_CHANGE}:{c}",
+                parameter="law",
+                value_si=float("nan"),
+                display=c,
+                rmse_train_deg=rmse_train,
+                rmse_test_deg=rmse_test_new,
+                expected_reduction=expected,
+                measured_reduction=measured,
+                evidence="",
+                significant=measured >= min_reduction and expected >= 0.5 * min_reduction,
+                model=fitted,
+            )
+        )
     for e in wanted:
         problem = block(e).excitation_problem(xs, rate)
         if problem:
             untestable[e] = problem
             continue
         fitted = model.with_effect(e).fit(train, progress=progress)
-        rmse_train, rmse_test = _rmse_deg(fitted, train), _rmse_deg(fitted, test)
+        rmse_train, rmse_test_new, expected, measured = scored(e, fitted)
         spec = next(p for p in BLOCKS[e].params if p.name == BLOCKS[e].primary)
         value = fitted.block_values()[e][spec.name]
-        measured = (base_test - rmse_test) / base_test
-        expected = (base_train - rmse_train) / base_train
-        evidence = report.by_name(EVIDENCE_TEST[e]).evidence()
+        before = regimes.rmse_deg(residual, EFFECT_REGIMES[e])
+        after = regimes.rmse_deg(_residuals(fitted, test), EFFECT_REGIMES[e])
+        in_regime = (before - after) / before if before > 0 else float("nan")
+        doubts = _pinned(fitted, e)
+        if math.isfinite(in_regime) and in_regime < REGIME_SHARE * measured:
+            doubts.append(
+                f"helps least where {e} shows ({', '.join(EFFECT_REGIMES[e])}: "
+                f"-{100 * in_regime:.0f} % there)"
+            )
+        removes = measured >= min_reduction and expected >= 0.5 * min_reduction
         candidates.append(
             Candidate(
                 effect=e,
@@ -228,11 +522,13 @@ def diagnose(
                 value_si=value,
                 display=spec.display(value),
                 rmse_train_deg=rmse_train,
-                rmse_test_deg=rmse_test,
+                rmse_test_deg=rmse_test_new,
                 expected_reduction=expected,
                 measured_reduction=measured,
-                evidence=evidence,
-                significant=measured >= min_reduction and expected >= 0.5 * min_reduction,
+                evidence=report.by_name(EVIDENCE_TEST[e]).evidence(),
+                significant=removes and not doubts,
+                regime_reduction=in_regime,
+                doubts=doubts if removes else [],
                 model=fitted,
             )
         )
@@ -241,21 +537,24 @@ def diagnose(
         model_kind=model.kind,
         chain=list(model.chain),
         rmse_train_deg=base_train,
-        rmse_test_deg=base_test,
+        rmse_test_deg=rmse_test,
         candidates=candidates,
         untestable=untestable,
         residual_report=report,
+        floors=floors,
+        regimes_deg=regimes_deg,
+        signature=signature,
     )
 
 
 def plot_diagnosis(diagnosis: Diagnosis, path: Path) -> Path:
-    """Held-out RMSE of the model and of each candidate refit: why the verdict is what it is."""
+    """Held-out RMSE of the model, of each change, and the floors: why the verdict."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7.5, 3.6), layout="constrained")
+    fig, ax = plt.subplots(figsize=(8.0, 3.8), layout="constrained")
     names = ["model", *[c.effect for c in diagnosis.candidates]]
     values = [diagnosis.rmse_test_deg, *[c.rmse_test_deg for c in diagnosis.candidates]]
     colors = ["grey", *["tab:green" if c.significant else "tab:blue" for c in diagnosis.candidates]]
@@ -267,9 +566,14 @@ def plot_diagnosis(diagnosis: Diagnosis, path: Path) -> Path:
         ls="--",
         label=f"{100 * MIN_REDUCTION:.0f} % below the model: significant",
     )
+    floors = diagnosis.floors
+    if math.isfinite(floors.noise_deg):
+        ax.axhline(floors.noise_deg, color="tab:red", lw=1.0, label="noise floor")
+    if math.isfinite(floors.reference_deg):
+        ax.axhline(floors.reference_deg, color="tab:purple", lw=1.0, ls=":", label=floors.reference)
     ax.set_ylabel("held-out RMSE [deg]")
     ax.set_title(f"{' -> '.join(diagnosis.chain)}: verdict {diagnosis.verdict}")
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.3), fontsize=8, frameon=False)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.3), fontsize=8, frameon=False, ncol=2)
     plt.setp(ax.get_xticklabels(), rotation=20, ha="right")
     fig.savefig(path, dpi=110)
     plt.close(fig)

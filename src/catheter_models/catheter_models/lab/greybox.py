@@ -41,7 +41,7 @@ from scipy import optimize
 
 from catheter_models.errors import ParameterError
 from catheter_models.lab.blocks import BLOCKS, Block, BlockParam, block, ordered
-from catheter_models.lab.cores import CORES, Core, DRDPICore, FreePI, make_core
+from catheter_models.lab.cores import CORES, Core, DRDPICore, FreePI, make_core, one_blas_thread
 from catheter_models.model_dir import Manifest
 from catheter_models.models.base import (
     DataRequirement,
@@ -68,7 +68,7 @@ _DRDPI_KEYS: Final = ("n_play", "n_deadband", "rate_filter_s", "budget")
 REDUCED_COLUMNS: Final = 32
 """Play combinations a linear core's block search works in (then every play again)."""
 
-STARTS: Final = 3
+STARTS: Final = 2
 """Grid points that start a joint polish (multi-start)."""
 
 GRID_POINTS: Final = {1: 12, 2: 6, 3: 4}
@@ -77,7 +77,7 @@ GRID_POINTS: Final = {1: 12, 2: 6, 3: 4}
 
 def _grid(p: BlockParam, n_params: int) -> FloatArray:
     """The search grid of one block parameter: log-spaced over a positive range."""
-    n = GRID_POINTS.get(n_params, 3)
+    n = p.grid_points or GRID_POINTS.get(n_params, 3)
     if p.low >= 0.0 and p.high > 0.0:
         low = p.low if p.low > 0.0 else 1e-2 * p.high
         points = np.geomspace(low, p.high, n)
@@ -97,14 +97,16 @@ class _Unit:
         out = (v - self.low) / (self.high - self.low)
         lg = self.log
         out[lg] = np.log(v[lg] / self.low[lg]) / np.log(self.high[lg] / self.low[lg])
-        return np.clip(out, 0.0, 1.0)
+        clipped: FloatArray = np.clip(out, 0.0, 1.0)
+        return clipped
 
     def from_unit(self, u: FloatArray) -> FloatArray:
         u = np.clip(u, 0.0, 1.0)
         out = self.low + u * (self.high - self.low)
         lg = self.log
         out[lg] = self.low[lg] * np.exp(u[lg] * np.log(self.high[lg] / self.low[lg]))
-        return out
+        result: FloatArray = np.asarray(out, dtype=float)
+        return result
 
 
 class GreyBox(Model):
@@ -170,6 +172,8 @@ class GreyBox(Model):
         self.polish_evals = polish_evals
         self.seed = int(seed)
         self._warm: tuple[Core, dict[str, list[float]]] | None = None
+        self._start_blocks: dict[str, list[float]] = {}
+        """Block values a core change starts its polish from (no grid: they are known)."""
 
     # -- the chain ---------------------------------------------------------------------------
     @property
@@ -282,6 +286,7 @@ class GreyBox(Model):
         return _GreyBoxStream(self)
 
     # -- identification ------------------------------------------------------------------------
+    @one_blas_thread
     def fit(
         self,
         train: Sequence[Recording],
@@ -298,7 +303,7 @@ class GreyBox(Model):
             problem = self._blocks[e].excitation_problem(xs, rate)
             if problem:
                 raise ParameterError(f"too little excitation to identify {e}: {problem}")
-        start_blocks: dict[str, list[float]] = dict(getattr(self, "_start_blocks", {}))
+        start_blocks = dict(self._start_blocks)
         if self._warm is not None:
             core, blocks = self._warm[0].copy(), dict(self._warm[1])
         else:
@@ -566,20 +571,25 @@ class _LinearFitter(_Fitter):
         return designs
 
     def _solve(
-        self, blocks: Mapping[str, Sequence[float]], beta: float
+        self, blocks: Mapping[str, Sequence[float]], beta: float, *, passes: int = 2
     ) -> tuple[FloatArray, list[FloatArray], list[FloatArray]]:
-        """Weights, and per recording the design through the output blocks and its offset."""
+        """Weights, and per recording the design through the output blocks and its offset.
+
+        The tip's damping follows the bend entering it, which the weights make: ``passes``
+        solves, each scheduling the tip by the previous weights' bend (the grid takes one).
+        """
         model = self.model
         outputs = [e for e in model.effects if BLOCKS[e].side == "output"]
         w = self.free.weights
         if w is not None and self.basis is not None:
             w = self.basis.T @ w
         designs = self._design(blocks, beta)
-        passes = 2 if "tip_dynamics" in outputs else 1
+        passes = passes if "tip_dynamics" in outputs else 1
         for _ in range(passes):
             mats, offsets = [], []
             for a in designs:
-                m = np.hstack([a, np.zeros((a.shape[0], 1))])  # last column: running offset
+                m = np.zeros((a.shape[0], a.shape[1] + 1))  # last column: running offset
+                m[:, :-1] = a
                 for e in outputs:
                     ref = m[:, :-1] @ w + m[:, -1] if w is not None else m[:, :-1].mean(axis=1)
                     m = model._blocks[e].apply_columns(m, self.rate, blocks[e], ref)
@@ -589,8 +599,10 @@ class _LinearFitter(_Fitter):
         assert w is not None
         return w, mats, offsets
 
-    def _residuals(self, blocks: Mapping[str, Sequence[float]], beta: float) -> FloatArray:
-        w, mats, offsets = self._solve(blocks, beta)
+    def _residuals(
+        self, blocks: Mapping[str, Sequence[float]], beta: float, *, passes: int = 2
+    ) -> FloatArray:
+        w, mats, offsets = self._solve(blocks, beta, passes=passes)
         return np.concatenate(
             [
                 (m @ w + c - y) * k
@@ -601,7 +613,7 @@ class _LinearFitter(_Fitter):
     def loss(self, blocks: Mapping[str, Sequence[float]]) -> float:
         # The rate factor is searched with the blocks: the core's own, or none (a lag or a
         # delay may be what the core's rate-dependent thresholds were standing in for).
-        return min(float(np.sum(self._residuals(blocks, b) ** 2)) for b in self.betas)
+        return min(float(np.sum(self._residuals(blocks, b, passes=1) ** 2)) for b in self.betas)
 
     def polish(self, blocks: dict[str, list[float]]) -> tuple[dict[str, list[float]], float]:
         lo_b, hi_b = self.block_bounds()
@@ -625,7 +637,7 @@ class _LinearFitter(_Fitter):
                 u0,
                 bounds=(0.0, 1.0),
                 method="trf",
-                max_nfev=max(10, self.model.polish_evals // 10),
+                max_nfev=max(8, self.model.polish_evals // 30),
                 diff_step=1e-3,
             )
             if 2 * result.cost <= float(np.sum(residuals(u0) ** 2)):

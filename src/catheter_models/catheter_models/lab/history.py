@@ -10,6 +10,7 @@ data is visible as such).
 from __future__ import annotations
 
 import json
+import math
 import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
@@ -44,6 +45,9 @@ class Version:
     rmse_test_deg: float | None
     test_sources: list[str] = field(default_factory=list)
     recorded_at: str = ""
+    noise_floor_deg: float | None = None
+    reference_deg: float | None = None
+    """The black-box reference's held-out RMSE on the same split (see lab.floors)."""
 
     def label(self) -> str:
         """How the plot and the table name it."""
@@ -54,6 +58,10 @@ def _rmse_deg(model: Model, recordings: Sequence[Recording]) -> float | None:
     if not recordings or model.direction != "forward":
         return None  # the history plots bend errors; an inverse model's are in pascals
     return float(rad_to_deg(pooled_rmse(model, recordings)))
+
+
+def _finite(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None
 
 
 def load_history(lab_dir: Path) -> list[Version]:
@@ -81,6 +89,7 @@ def record(
     test: Sequence[Recording] = (),
     added: str | None = None,
     parent: int | None = None,
+    floors: tuple[float, float] | None = None,
 ) -> Version:
     """Append ``model`` (saved at ``model_dir``) as the next version; returns it."""
     lab_dir = Path(lab_dir)
@@ -98,6 +107,8 @@ def record(
         rmse_test_deg=_rmse_deg(model, test),
         test_sources=[r.source or r.name for r in test],
         recorded_at=time.strftime("%Y-%m-%dT%H:%M:%S"),
+        noise_floor_deg=_finite(floors[0]) if floors else None,
+        reference_deg=_finite(floors[1]) if floors else None,
     )
     with (lab_dir / HISTORY_FILE).open("a") as fh:
         fh.write(json.dumps(asdict(entry)) + "\n")
@@ -145,6 +156,15 @@ def plot_history(versions: Sequence[Version], path: Path) -> Path:
     ax.set_xticks(
         x, [f"v{v.version}\n+{v.added}" if v.added else f"v{v.version}" for v in versions]
     )
+    for key, label, color, style in (
+        ("noise_floor_deg", "noise floor", "tab:red", "-"),
+        ("reference_deg", "black-box reference", "tab:purple", ":"),
+    ):
+        y = [getattr(v, key) for v in versions]
+        if any(val is not None for val in y):
+            ax.plot(
+                x, [np.nan if val is None else val for val in y], style, color=color, label=label
+            )
     ax.set_ylabel("RMSE [deg]")
     ax.set_ylim(bottom=0.0)
     ax.set_title("model versions: " + " | ".join(" -> ".join(v.chain) for v in versions[-1:]))

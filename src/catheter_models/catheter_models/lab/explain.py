@@ -1,0 +1,123 @@
+"""The lab's whole loop: diagnose, make the best change, diagnose again, until nothing helps.
+
+``explain(model, train, test)`` is what a person does by hand with ``catheter-lab diagnose``
+and ``catheter-lab add`` / ``core``, one step at a time: each step's diagnosis ranks every
+core change and every missing catalogue effect by the held-out error it removes; the best
+change that earns its place is made (its refitted model is the next version); the loop stops
+when no change does, with the last diagnosis's verdict: adequate (near the noise floor or the
+black-box reference) or unexplained (how far above them, where, and with which signature).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from catheter_models.lab.cores import CORES
+from catheter_models.lab.diagnose import Diagnosis, diagnose
+from catheter_models.models.base import Model, Recording
+from catheter_models.models.drdpi import DRDPI
+
+
+def _core_of(model: Model) -> str:
+    return "drdpi" if isinstance(model, DRDPI) else str(getattr(model, "core_name", ""))
+
+
+@dataclass
+class Step:
+    """One version of the model in the loop and what its diagnosis said."""
+
+    model: Model
+    change: str | None
+    """The change that made this version (None for the model the loop started from)."""
+    diagnosis: Diagnosis
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready, without the model."""
+        d = self.diagnosis
+        return {
+            "change": self.change,
+            "chain": d.chain,
+            "rmse_train_deg": d.rmse_train_deg,
+            "rmse_test_deg": d.rmse_test_deg,
+            "verdict": d.verdict,
+        }
+
+
+@dataclass
+class Explanation:
+    """Every step of the loop; the last one's diagnosis is the answer."""
+
+    steps: list[Step]
+
+    @property
+    def final(self) -> Diagnosis:
+        """The last diagnosis (its verdict is adequate or unexplained)."""
+        return self.steps[-1].diagnosis
+
+    @property
+    def changes(self) -> list[str]:
+        """The changes made, in order (``core:<name>`` for a core change)."""
+        return [s.change for s in self.steps if s.change is not None]
+
+    def text(self) -> str:
+        """The table of steps, then the final diagnosis."""
+        floors = self.final.floors
+        lines = [f"{'step':>4} {'train':>7} {'held-out':>8}  change              chain"]
+        for i, s in enumerate(self.steps):
+            d = s.diagnosis
+            lines.append(
+                f"{i:>4} {d.rmse_train_deg:7.3f} {d.rmse_test_deg:8.3f}  "
+                f"{(s.change or '-'):<19} {' -> '.join(d.chain)}"
+            )
+        lines.append(f"(RMSE in deg; {floors.text(self.final.rmse_test_deg)})")
+        lines.append("")
+        lines.append(self.final.text())
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready."""
+        return {
+            "steps": [s.to_dict() for s in self.steps],
+            "changes": self.changes,
+            "final": self.final.to_dict(),
+        }
+
+
+def explain(
+    model: Model,
+    train: Sequence[Recording],
+    test: Sequence[Recording],
+    *,
+    max_steps: int = 4,
+    progress: bool = False,
+    on_step: Callable[[Step], None] | None = None,
+) -> Explanation:
+    """Diagnose and make the best change until none earns its place (at most ``max_steps``).
+
+    ``on_step`` is called with each step as it is made (to save the version, say).
+    """
+    diagnosis = diagnose(model, train, test, progress=progress)
+    steps = [Step(model, None, diagnosis)]
+    if on_step is not None:
+        on_step(steps[-1])
+    # A core, once left, does not come back: only untried cores compete in later steps.
+    tried_cores = {_core_of(model)}
+    while len(steps) <= max_steps:
+        best = diagnosis.best
+        if best is None or best.model is None:
+            break
+        model = best.model
+        tried_cores.add(_core_of(model))
+        diagnosis = diagnose(
+            model,
+            train,
+            test,
+            cores=[c for c in CORES if c not in tried_cores],
+            progress=progress,
+        )
+        steps.append(Step(model, best.effect, diagnosis))
+        if on_step is not None:
+            on_step(steps[-1])
+    return Explanation(steps)

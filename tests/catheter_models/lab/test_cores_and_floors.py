@@ -1,0 +1,223 @@
+"""Cores, floors and verdicts: the lab's judgement on plants it was not developed on.
+
+The foreign plants (tests/support/foreign_plants) are written apart from the project's
+simulator; the lab must never import them, or its tests on them prove nothing.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from foreign_plants import PLANTS
+from foreign_plants.cases import draw_case
+
+from catheter_models.cli import main
+from catheter_models.lab.diagnose import Candidate, Diagnosis, Floors, diagnose
+from catheter_models.lab.floors import FilterBankReference, noise_std_deg
+from catheter_models.lab.greybox import GreyBox
+from catheter_models.lab.residuals import residual_tests
+from catheter_models.models import load_model
+from catheter_models.models.evaluate import pooled_rmse
+
+REPO = Path(__file__).resolve().parents[3]
+
+
+def test_nothing_under_src_imports_the_foreign_plants() -> None:
+    offenders = [
+        str(p.relative_to(REPO))
+        for p in (REPO / "src").rglob("*.py")
+        if re.search(r"\bforeign_plants\b", p.read_text())
+    ]
+    assert not offenders, offenders
+
+
+@pytest.mark.parametrize("plant", sorted(PLANTS))
+def test_the_noise_floor_is_estimated_from_the_data(plant: str) -> None:
+    case = draw_case(PLANTS[plant], [], 3)
+    truth = math.degrees(case.plant.noise_std_rad)
+    for rec in (case.train, case.test):
+        assert noise_std_deg([rec]) == pytest.approx(truth, rel=0.1)
+
+
+@pytest.fixture(scope="module")
+def creep_case():
+    return draw_case(PLANTS["maxwell_slip"], ["creep"], 5)
+
+
+def test_a_free_pi_greybox_saves_loads_and_streams(tmp_path: Path, creep_case) -> None:
+    model = GreyBox(core="free_pi").fit([creep_case.train], progress=False)
+    model.save(tmp_path / "m", training=[creep_case.train])
+    loaded = load_model(tmp_path / "m")
+    assert isinstance(loaded, GreyBox) and loaded.chain == ("free_pi",)
+    x = creep_case.test.pressure_pa[:2000]
+    np.testing.assert_array_equal(loaded.predict(x), model.predict(x))
+    stream = loaded.stream()
+    np.testing.assert_allclose([stream.step(p) for p in x[:300]], model.predict(x[:300]))
+    doc = json.loads((tmp_path / "m" / "greybox.json").read_text())
+    assert doc["format"] == 2 and doc["core"]["name"] == "free_pi"
+
+
+@pytest.mark.slow
+def test_a_block_search_refits_a_linear_core_and_finds_the_hidden_creep(creep_case) -> None:
+    base = GreyBox(core="free_pi").fit([creep_case.train], progress=False)
+    crept = base.with_effect("creep").fit([creep_case.train], progress=False)
+    before = pooled_rmse(base, [creep_case.test])
+    after = pooled_rmse(crept, [creep_case.test])
+    assert after < 0.7 * before
+    truth = creep_case.effects[0].params
+    fraction = crept.block_values()["creep"]["fraction"]
+    assert fraction == pytest.approx(truth["fraction"], rel=0.5)
+
+
+def test_the_black_box_reference_learns_what_a_plain_core_cannot(creep_case) -> None:
+    reference = FilterBankReference().fit([creep_case.train])
+    core_only = GreyBox(core="free_pi").fit([creep_case.train], progress=False)
+    assert reference.rmse_deg([creep_case.test]) < 0.8 * math.degrees(
+        pooled_rmse(core_only, [creep_case.test])
+    )
+
+
+def _diagnosis(rmse: float, noise: float, reference: float, *candidates: Candidate) -> Diagnosis:
+    rng = np.random.default_rng(0)
+    report = residual_tests(rng.normal(size=2000), rng.normal(size=2000), 250.0)
+    return Diagnosis(
+        model_kind="greybox",
+        chain=["free_pi"],
+        rmse_train_deg=rmse,
+        rmse_test_deg=rmse,
+        candidates=list(candidates),
+        untestable={},
+        residual_report=report,
+        floors=Floors(noise, reference),
+        regimes_deg={"plateau": 0.9, "fast_motion": 0.2},
+        signature=["keeps moving on plateaus"],
+    )
+
+
+def test_adequate_only_near_the_floors() -> None:
+    assert _diagnosis(0.12, 0.05, 0.4).verdict == "adequate"  # within 3x the noise
+    assert _diagnosis(0.42, 0.05, 0.4).verdict == "adequate"  # no black box does better
+    far = _diagnosis(1.0, 0.05, 0.3)
+    assert far.verdict == "unexplained"
+    text = far.text()
+    assert "unexplained" in text and "20.0 x" in text and "plateau 0.900 deg" in text
+    assert "keeps moving on plateaus" in text
+
+
+def test_a_change_that_does_not_earn_its_place_is_shown_but_not_named() -> None:
+    doubtful = Candidate(
+        effect="creep",
+        parameter="fraction",
+        value_si=0.5,
+        display="50 %",
+        rmse_train_deg=0.5,
+        rmse_test_deg=0.5,
+        expected_reduction=0.5,
+        measured_reduction=0.5,
+        evidence="",
+        significant=False,
+        doubts=["fraction at the end of its range (50 %)"],
+    )
+    d = _diagnosis(1.0, 0.05, 0.3, doubtful)
+    assert d.verdict == "unexplained" and d.best is None
+    assert "not counted: fraction at the end of its range" in d.text()
+
+
+@pytest.mark.slow
+def test_on_a_foreign_plant_the_core_is_named_as_the_largest_miss() -> None:
+    case = draw_case(PLANTS["boucwen"], [], 7)
+    drdpi = GreyBox().fit([case.train], progress=False)
+    result = diagnose(drdpi, [case.train], [case.test], effects=[])
+    print(result.text())
+    assert result.verdict == "core free_pi", result.text()
+    assert result.best is not None and result.best.measured_reduction > 0.5
+
+
+def _run(argv: list[str]) -> int:
+    try:
+        main(argv)
+    except SystemExit as exc:
+        return int(exc.code or 0)
+    return 0
+
+
+@pytest.mark.slow
+def test_core_and_explain_on_the_command_line(tmp_path: Path, creep_case, capsys) -> None:
+    from catheter_models.bag import write_bag_from_arrays
+
+    train, test = tmp_path / "train", tmp_path / "test"
+    for path, rec in ((train, creep_case.train), (test, creep_case.test)):
+        t_s = np.arange(rec.pressure_pa.size) / rec.rate_hz
+        write_bag_from_arrays(path, t_s, rec.pressure_pa, rec.pressure_pa, rec.angle_rad)
+    drdpi = tmp_path / "drdpi"
+    budget = '{"max_generations": 8, "wall_time_s": 8}'
+    assert (
+        _run(
+            [
+                "train",
+                "drdpi",
+                "--train",
+                str(train),
+                "-o",
+                str(drdpi),
+                "--quiet",
+                "--set",
+                f"budget={budget}",
+            ]
+        )
+        == 0
+    )
+    lab = tmp_path / "lab"
+    assert (
+        _run(
+            [
+                "core",
+                "free_pi",
+                str(drdpi),
+                "-o",
+                str(tmp_path / "v2"),
+                "--train",
+                str(train),
+                "--test",
+                str(test),
+                "--lab",
+                str(lab),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
+    out = capsys.readouterr().out
+    assert "free_pi" in out and (lab / "history.jsonl").is_file()
+    out_dir = tmp_path / "explained"
+    assert (
+        _run(
+            [
+                "explain",
+                str(tmp_path / "v2"),
+                "--train",
+                str(train),
+                "--test",
+                str(test),
+                "-o",
+                str(out_dir),
+                "--max-steps",
+                "2",
+            ]
+        )
+        == 0
+    )
+    out = capsys.readouterr().out
+    assert "add creep" in out, out
+    assert (out_dir / "history.png").is_file() and (out_dir / "explanation.json").is_file()
+    doc = json.loads((out_dir / "explanation.json").read_text())
+    assert doc["changes"][0] == "creep"
+    history = [json.loads(line) for line in (out_dir / "history.jsonl").read_text().splitlines()]
+    assert history[0]["noise_floor_deg"] == pytest.approx(
+        math.degrees(creep_case.plant.noise_std_rad), rel=0.1
+    )
