@@ -164,13 +164,15 @@ def test_each_block_streams_what_it_applies(effect: str) -> None:
     np.testing.assert_allclose(streamed, block(effect).apply(x, RATE_HZ, values), atol=1e-9)
 
 
-@pytest.mark.parametrize("core", ["drdpi", "free_pi", "boucwen"])
+@pytest.mark.parametrize("core", ["drdpi", "free_pi", "boucwen", "gpi"])
 def test_a_greybox_with_every_block_streams_its_prediction(core: str, drdpi_and_data) -> None:
     drdpi, recs = drdpi_and_data
     if core == "drdpi":
         fitted = GreyBox.from_drdpi(drdpi).core_
     else:
         fitted = make_core(core, {"starts": 1} if core == "boucwen" else {})
+        if core == "gpi":
+            fitted = make_core(core)
         fitted.fit(
             [pa_to_bar(r.pressure_pa) for r in recs],
             [rad_to_deg(r.angle_rad) for r in recs],

@@ -732,7 +732,130 @@ class DRDPICore(Core):
             raise ModelError(f"drdpi core values are malformed: {exc}") from None
 
 
-CORES: Final[Mapping[str, type[Core]]] = {c.name: c for c in (DRDPICore, FreePI, BoucWen)}
+# ------------------------------------------------------------------------------------------
+# gpi: the thesis's Generalized Prandtl-Ishlinskii (ch. 9), rate-independent
+# ------------------------------------------------------------------------------------------
+
+
+class GPICore(Core):
+    """The thesis's GPI (``models.gpi``): a tanh envelope, exponentially weighted plays.
+
+    Rate-independent: the thesis fits one per frequency; as a core it is fitted on all the
+    data at once, so it shows how much of the error is the rate dependence it lacks.
+    """
+
+    name = "gpi"
+    summary = "the thesis's GPI: tanh envelope, exponential play density, rate-independent"
+
+    def __init__(self, *, n_play: int = 10, seed: int = 0) -> None:
+        self.n_play, self.seed = int(n_play), int(seed)
+        self.params: Any = None
+
+    def settings(self) -> dict[str, Any]:
+        """Structure and seed of the search."""
+        return {"n_play": self.n_play, "seed": self.seed}
+
+    @property
+    def fitted(self) -> bool:
+        """Whether parameters are set."""
+        return self.params is not None
+
+    def _coef(self, params: Any) -> FloatArray:
+        from catheter_models.models.gpi import gpi_coefficients
+
+        coef: FloatArray = gpi_coefficients(params, self.n_play)
+        return coef
+
+    def fit(
+        self, xs: Sequence[FloatArray], ys: Sequence[FloatArray], rate_hz: float, **kw: Any
+    ) -> None:
+        """The GPI's own identification on all recordings together."""
+        from catheter_models.models.base import Recording
+        from catheter_models.models.gpi import GPI
+        from catheter_models.units import bar_to_pa, deg_to_rad
+
+        recs = [
+            Recording(f"r{i}", rate_hz, bar_to_pa(x), deg_to_rad(y))
+            for i, (x, y) in enumerate(zip(xs, ys, strict=True))
+        ]
+        model = GPI(
+            n_play=self.n_play, seed=self.seed, budget={"max_generations": 40, "wall_time_s": 20.0}
+        )
+        self.params = model.fit(recs, progress=bool(kw.get("progress"))).params_
+
+    def run(self, x: FloatArray, rate_hz: float) -> FloatArray:
+        """Bend [deg] from rest."""
+        from catheter_models.models.gpi import run_gpi
+
+        if self.params is None:
+            raise ModelError("gpi core is not fitted")
+        return run_gpi(self._coef(self.params), x)
+
+    def streamer(self, rate_hz: float) -> Step:
+        """The GPI one sample at a time."""
+        from catheter_models.hysteresis import operators as op
+
+        if self.params is None:
+            raise ModelError("gpi core is not fitted")
+        coef = self._coef(self.params)
+        state, sample, out = op.gpi_rest_state(coef), np.zeros(1), np.zeros(1)
+
+        def step(x: float) -> float:
+            sample[0] = x
+            op.gpi_run(sample, coef, state, out)
+            return float(out[0])
+
+        return step
+
+    def vector(self) -> FloatArray:
+        """Table 9.1's parameters."""
+        return np.asarray(self.params.as_array(), dtype=float)
+
+    def bounds(self) -> tuple[FloatArray, FloatArray]:
+        """Each parameter within a factor of its value's neighbourhood (a local polish)."""
+        v = self.vector()
+        span = np.maximum(np.abs(v), 0.1)
+        low, high = v - 2.0 * span, v + 2.0 * span
+        # c0, c1, beta, q stay positive (the GPI's validity).
+        for i in (0, 1, 4, 7):
+            low[i] = max(low[i], 1e-3)
+        low[5] = max(low[5], 0.0)
+        return low, high
+
+    def runner(self, v: FloatArray, rate_hz: float) -> Callable[[FloatArray], FloatArray] | None:
+        """The GPI with parameters ``v``; None if they are not valid."""
+        from catheter_models.models.gpi import GPIParams, run_gpi
+
+        try:
+            coef = self._coef(GPIParams.from_array(v))
+        except (ParameterError, ValueError):
+            return None
+        return lambda x: run_gpi(coef, x)
+
+    def set_vector(self, v: FloatArray) -> None:
+        """Adopt ``v``."""
+        from catheter_models.models.gpi import GPIParams
+
+        self.params = GPIParams.from_array(v)
+
+    def values(self) -> dict[str, Any]:
+        """Table 9.1's parameters by name."""
+        if self.params is None:
+            raise ModelError("gpi core is not fitted")
+        out: dict[str, Any] = self.params.to_dict()
+        return out
+
+    def load_values(self, values: Mapping[str, Any]) -> None:
+        """Table 9.1's parameters from a model file."""
+        from catheter_models.models.gpi import GPIParams
+
+        try:
+            self.params = GPIParams.from_dict(dict(values))
+        except (KeyError, TypeError, ValueError, ParameterError) as exc:
+            raise ModelError(f"gpi core values are malformed: {exc}") from None
+
+
+CORES: Final[Mapping[str, type[Core]]] = {c.name: c for c in (DRDPICore, FreePI, BoucWen, GPICore)}
 """Cores by name; the first is the thesis's default."""
 
 
