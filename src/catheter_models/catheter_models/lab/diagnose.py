@@ -386,9 +386,13 @@ def _pinned(model: GreyBox, effect: str) -> list[str]:
     pinned = []
     for p, v in zip(BLOCKS[effect].params, model.blocks_[effect], strict=True):
         span = p.high - p.low
-        if effect == "drift" or (p.low == 0.0 and v <= p.low + 1e-6 * span):
-            continue  # a drift's range is symmetric; a zero share or delay is a plain answer
-        if p.low > 0.0 and p.high / p.low > 10.0:
+        if effect == "drift":
+            continue  # a drift's range is symmetric: either end is a plain answer
+        if p.low == 0.0:
+            # Zero (no delay, no share, no growth of the tip's damping) is a plain answer;
+            # only the top of the range means the block stands in for something else.
+            near = p.high - v < 0.01 * span
+        elif p.high / p.low > 10.0:
             near = min(math.log(v / p.low), math.log(p.high / v)) < 0.01 * math.log(p.high / p.low)
         else:
             near = min(v - p.low, p.high - v) < 0.01 * span
