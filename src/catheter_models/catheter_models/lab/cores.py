@@ -566,6 +566,17 @@ class BoucWen(Core):
 # ------------------------------------------------------------------------------------------
 
 
+def _recordings(xs: Sequence[FloatArray], ys: Sequence[FloatArray], rate_hz: float) -> list[Any]:
+    """The chain's bar/deg arrays as SI Recordings, for a thesis model's own identification."""
+    from catheter_models.models.base import Recording
+    from catheter_models.units import bar_to_pa, deg_to_rad
+
+    return [
+        Recording(f"r{i}", rate_hz, bar_to_pa(x), deg_to_rad(y))
+        for i, (x, y) in enumerate(zip(xs, ys, strict=True))
+    ]
+
+
 class DRDPICore(Core):
     """The thesis's DRDPI (``models.drdpi``) as a core: its global search, its 12 parameters.
 
@@ -642,13 +653,7 @@ class DRDPICore(Core):
         self, xs: Sequence[FloatArray], ys: Sequence[FloatArray], rate_hz: float, **kw: Any
     ) -> None:
         """The DRDPI's global search, then its polish."""
-        from catheter_models.models.base import Recording
-        from catheter_models.units import bar_to_pa, deg_to_rad
-
-        recs = [
-            Recording(f"r{i}", rate_hz, bar_to_pa(x), deg_to_rad(y))
-            for i, (x, y) in enumerate(zip(xs, ys, strict=True))
-        ]
+        recs = _recordings(xs, ys, rate_hz)
         self.set_params(self._model.fit(recs, progress=bool(kw.get("progress"))).params_)
 
     @staticmethod
@@ -770,14 +775,9 @@ class GPICore(Core):
         self, xs: Sequence[FloatArray], ys: Sequence[FloatArray], rate_hz: float, **kw: Any
     ) -> None:
         """The GPI's own identification on all recordings together."""
-        from catheter_models.models.base import Recording
         from catheter_models.models.gpi import GPI
-        from catheter_models.units import bar_to_pa, deg_to_rad
 
-        recs = [
-            Recording(f"r{i}", rate_hz, bar_to_pa(x), deg_to_rad(y))
-            for i, (x, y) in enumerate(zip(xs, ys, strict=True))
-        ]
+        recs = _recordings(xs, ys, rate_hz)
         model = GPI(
             n_play=self.n_play, seed=self.seed, budget={"max_generations": 40, "wall_time_s": 20.0}
         )
