@@ -82,7 +82,8 @@ def test_layout_schema_channel_and_metadata(tmp_path: Path) -> None:
     assert topic["type_description_hash"] == kilted_typestore().hash_rihs01(
         PRESSURE_COMMAND.msgtype
     )
-    assert topic["offered_qos_profiles"][0]["reliability"] == "best_effort"
+    # Streams offer reliable delivery (docs/interfaces.md), so `ros2 bag play` republishes so.
+    assert topic["offered_qos_profiles"][0]["reliability"] == "reliable"
 
     with (bag / "sample_0.mcap").open("rb") as stream:
         reader = make_reader(stream)

@@ -117,8 +117,8 @@ class CompensatorNode(LoopNode):
         self._refusal_standing = False
         self._accepted = 0
 
-        self._pub_cmd = self.create_publisher(FluidPressure, PRESSURE_COMMAND.name, qos.SENSOR)
-        self._pub_des = self.create_publisher(JointState, ANGLE_DESIRED.name, qos.SENSOR)
+        self._pub_cmd = self.create_publisher(FluidPressure, PRESSURE_COMMAND.name, qos.STREAM)
+        self._pub_des = self.create_publisher(JointState, ANGLE_DESIRED.name, qos.STREAM)
         self._pub_diag = diagnostics.create_diagnostics_publisher(self)
         # Security: with this off nothing on the DDS network can make this node move the
         # catheter (it still holds the line at rest, reports, and answers ~/stop).

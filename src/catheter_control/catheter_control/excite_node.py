@@ -101,7 +101,7 @@ class ExciteNode(LoopNode):
         self.spec_names = [spec.name for spec in specs]
         self.signal_name = name
         self.done = threading.Event()
-        self._pub = self.create_publisher(FluidPressure, PRESSURE_COMMAND.name, qos.SENSOR)
+        self._pub = self.create_publisher(FluidPressure, PRESSURE_COMMAND.name, qos.STREAM)
         self._pub_diag = diagnostics.create_diagnostics_publisher(self)
         self._first_k: int | None = None
         self._wait_until_s = 0.0

@@ -13,7 +13,7 @@ from rclpy.qos import (
 from catheter_driver import qos as _driver_qos
 
 SENSOR = qos_profile_sensor_data
-"""Sensor and command streams: best effort, keep last, shallow queue."""
+"""What a controller asks of a stream: best effort, the newest few samples."""
 
 TRAJECTORY = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
@@ -24,5 +24,7 @@ TRAJECTORY = QoSProfile(
 """``trajectory``: reliable and transient-local, so a late subscriber still gets it."""
 
 
-# Defined with the drivers, which need it too (control may import driver, not back).
+# Defined with the drivers, which need them too (control may import driver, not back).
+STREAM = _driver_qos.STREAM
 KEEP_EVERY_SAMPLE = _driver_qos.KEEP_EVERY_SAMPLE
+RECORD = _driver_qos.RECORD

@@ -19,7 +19,7 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import FluidPressure, JointState, Range
 from std_srvs.srv import Trigger
 
-from catheter_driver import diagnostics, messages
+from catheter_driver import diagnostics, messages, qos
 from catheter_driver.devices.factory import make_laser_adc
 from catheter_driver.laser_core import Calibration, LaserAngleCore, ZeroingError
 from catheter_driver.lifecycle_util import device_options
@@ -85,10 +85,8 @@ class LaserAngleNode(LifecycleNode):
             float(self.geometry.voltage_to_distance_m(0.0)),
             float(self.geometry.voltage_to_distance_m(10.0)),
         )
-        self._pub_distance = self.create_publisher(
-            Range, TIP_DISTANCE.name, qos_profile_sensor_data
-        )
-        self._pub_angle = self.create_publisher(JointState, TIP_ANGLE.name, qos_profile_sensor_data)
+        self._pub_distance = self.create_publisher(Range, TIP_DISTANCE.name, qos.STREAM)
+        self._pub_angle = self.create_publisher(JointState, TIP_ANGLE.name, qos.STREAM)
         self._pub_diag = diagnostics.create_diagnostics_publisher(self)
         self.create_subscription(
             FluidPressure, PRESSURE_MEASURED.name, self._on_pressure, qos_profile_sensor_data

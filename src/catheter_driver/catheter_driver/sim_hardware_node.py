@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import time
 
-from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import FluidPressure, JointState, Range
 
 from catheter_driver import diagnostics, messages, qos
@@ -63,12 +62,10 @@ class SimHardwareNode(LoopNode):
         )
 
         self._pub_pressure = self.create_publisher(
-            FluidPressure, PRESSURE_MEASURED.name, qos_profile_sensor_data
+            FluidPressure, PRESSURE_MEASURED.name, qos.STREAM
         )
-        self._pub_distance = self.create_publisher(
-            Range, TIP_DISTANCE.name, qos_profile_sensor_data
-        )
-        self._pub_angle = self.create_publisher(JointState, TIP_ANGLE.name, qos_profile_sensor_data)
+        self._pub_distance = self.create_publisher(Range, TIP_DISTANCE.name, qos.STREAM)
+        self._pub_angle = self.create_publisher(JointState, TIP_ANGLE.name, qos.STREAM)
         self._pub_diag = diagnostics.create_diagnostics_publisher(self)
         self.create_subscription(
             FluidPressure, PRESSURE_COMMAND.name, self._on_command, qos.KEEP_EVERY_SAMPLE

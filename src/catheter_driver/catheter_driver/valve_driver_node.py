@@ -17,7 +17,6 @@ from __future__ import annotations
 import time
 
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
-from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import FluidPressure
 from std_srvs.srv import SetBool, Trigger
 
@@ -69,7 +68,7 @@ class ValveDriverNode(LifecycleNode):
         self._last_tick_state = "unconfigured"
         self._last_reason = "not configured"
         self._pub_measured = self.create_publisher(
-            FluidPressure, PRESSURE_MEASURED.name, qos_profile_sensor_data
+            FluidPressure, PRESSURE_MEASURED.name, qos.STREAM
         )
         self._pub_diag = diagnostics.create_diagnostics_publisher(self)
         # Every command is counted (and every NaN refused and reported), so none may be

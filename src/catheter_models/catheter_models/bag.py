@@ -15,7 +15,7 @@ module:
 from __future__ import annotations
 
 from catheter_models.bag_info import bag_info
-from catheter_models.bag_metadata import LATCHED_QOS, SENSOR_DATA_QOS, QosProfile
+from catheter_models.bag_metadata import LATCHED_QOS, SENSOR_DATA_QOS, STREAM_QOS, QosProfile
 from catheter_models.bag_reader import AlignedSeries, BagData, StampedSeries, load_bag
 from catheter_models.bag_repair import RepairReport, repair_bag
 from catheter_models.bag_writer import BagRecorder, SchemaText, write_bag_from_arrays
@@ -23,6 +23,7 @@ from catheter_models.bag_writer import BagRecorder, SchemaText, write_bag_from_a
 __all__ = [
     "LATCHED_QOS",
     "SENSOR_DATA_QOS",
+    "STREAM_QOS",
     "AlignedSeries",
     "BagData",
     "BagRecorder",

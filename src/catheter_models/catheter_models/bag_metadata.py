@@ -108,7 +108,11 @@ class QosProfile:
 SENSOR_DATA_QOS: Final = QosProfile(
     history="keep_last", depth=5, reliability="best_effort", durability="volatile"
 )
-"""rclpy's ``qos_profile_sensor_data``: what the contract's sensor and command streams offer."""
+"""rclpy's ``qos_profile_sensor_data``: what the streams offered before they were reliable."""
+STREAM_QOS: Final = QosProfile(
+    history="keep_last", depth=500, reliability="reliable", durability="volatile"
+)
+"""What the contract's sensor and command streams offer (``catheter_driver.qos.STREAM``)."""
 LATCHED_QOS: Final = QosProfile(
     history="keep_last", depth=1, reliability="reliable", durability="transient_local"
 )

@@ -36,7 +36,7 @@ from catheter_models.bag_messages import (
     range_cdr,
 )
 from catheter_models.bag_metadata import (
-    SENSOR_DATA_QOS,
+    STREAM_QOS,
     BagSummary,
     QosProfile,
     TopicSummary,
@@ -534,13 +534,13 @@ def write_bag_from_arrays(
     with BagRecorder(
         path, custom_data=custom_data, flush_period_s=None, compression=compression
     ) as rec:
-        rec.add_topic(topic_command, PRESSURE_COMMAND.msgtype, offered_qos=[SENSOR_DATA_QOS])
-        rec.add_topic(topic_measured, PRESSURE_MEASURED.msgtype, offered_qos=[SENSOR_DATA_QOS])
-        rec.add_topic(topic_angle, TIP_ANGLE.msgtype, offered_qos=[SENSOR_DATA_QOS])
+        rec.add_topic(topic_command, PRESSURE_COMMAND.msgtype, offered_qos=[STREAM_QOS])
+        rec.add_topic(topic_measured, PRESSURE_MEASURED.msgtype, offered_qos=[STREAM_QOS])
+        rec.add_topic(topic_angle, TIP_ANGLE.msgtype, offered_qos=[STREAM_QOS])
         if distance is not None:
-            rec.add_topic(topic_distance, TIP_DISTANCE.msgtype, offered_qos=[SENSOR_DATA_QOS])
+            rec.add_topic(topic_distance, TIP_DISTANCE.msgtype, offered_qos=[STREAM_QOS])
         if desired is not None:
-            rec.add_topic(topic_desired, ANGLE_DESIRED.msgtype, offered_qos=[SENSOR_DATA_QOS])
+            rec.add_topic(topic_desired, ANGLE_DESIRED.msgtype, offered_qos=[STREAM_QOS])
         for i in range(n):
             stamp = int(stamps_ns[i])
             rec.write(
