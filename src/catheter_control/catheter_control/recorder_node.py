@@ -1,18 +1,29 @@
-"""``recorder``: write the contract's topics to an MCAP rosbag2 bag.
+"""``recorder``: write the contract's topics to an MCAP rosbag2 bag, and say what it lost.
 
 Messages are taken raw (serialized CDR) and written as they came, stamped with receive time as
 log time; the header stamps inside carry the time each value was true. The writer closes a
 chunk and flushes every ``flush_period_s``, so a killed recorder leaves a bag that
 ``catheter-lab bag repair`` recovers up to its last chunk.
+
+Intake never waits for the disk: the subscription callbacks only queue the message, and a
+writer thread drains the queue into the bag, so a slow flush cannot fill a subscription's
+queue. The subscriptions ask for reliable delivery (``qos.RECORD``) from the streams'
+reliable publishers, and the node spins rclpy's EventsExecutor (a quarter of the CPU per
+message). Whatever is lost anyway (a best-effort publisher over a lossy link, a queue overrun)
+shows as a gap in the header stamps: counted per topic (``catheter_models.gaps``), reported
+on ``/diagnostics`` and written into the bag's ``custom_data`` (``samples_lost``, ``gaps``).
 """
 
 from __future__ import annotations
 
 import json
+import threading
+from collections import deque
 from pathlib import Path
 from typing import Any
 
 from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.subscription import Subscription
 
 from catheter_control import qos
@@ -21,13 +32,17 @@ from catheter_driver.messages import message_class
 from catheter_driver.node_main import run_node
 from catheter_driver.params import declare_plain
 from catheter_models import __version__
-from catheter_models.bag import LATCHED_QOS, SENSOR_DATA_QOS, BagRecorder
-from catheter_models.contract import RECORDED_TOPICS, TRAJECTORY, TopicSpec
+from catheter_models.bag import LATCHED_QOS, STREAM_QOS, BagRecorder
+from catheter_models.contract import RECORDED_TOPICS, RUN_STREAMS, TRAJECTORY, TopicSpec
 from catheter_models.errors import ParameterError
+from catheter_models.gaps import StreamGaps, header_stamp_ns
+
+_DRAIN_S = 0.005
+"""How often the writer thread looks for queued messages [s] (cheaper than a wake-up each)."""
 
 
 class RecorderNode(Node):
-    """Thin ROS shell over :class:`BagRecorder`."""
+    """Thin ROS shell over :class:`BagRecorder`, with a non-blocking intake and gap counts."""
 
     def __init__(self) -> None:
         super().__init__("recorder")
@@ -55,37 +70,128 @@ class RecorderNode(Node):
             compression=compression,  # type: ignore[arg-type]
         )
         self.counts: dict[str, int] = {}
+        self.gaps: dict[str, StreamGaps] = {}
+        self._queue: deque[tuple[str, bytes, int]] = deque()
+        self.queue_max = 0
+        """The deepest the intake queue has been (messages waiting for the writer thread)."""
         self._subscriptions_by_topic: dict[str, Subscription[Any]] = {}
+        self._specs: dict[str, TopicSpec] = {}
+        self._best_effort: set[str] = set()
         for spec in RECORDED_TOPICS:
             self._record(spec)
+        self._stop = threading.Event()
+        self._writer_error: BaseException | None = None
+        self._writer_thread = threading.Thread(target=self._write_loop, name="bag_writer")
+        self._writer_thread.start()
         self._pub_diag = diagnostics.create_diagnostics_publisher(self)
         self.create_timer(1.0, self._publish_diagnostics)
         self.get_logger().info(f"recording to {self.bag_path}")
 
+    # -- intake (executor thread): queue and return ---------------------------------------
     def _record(self, spec: TopicSpec) -> None:
         # The bag names topics as they were on the wire, namespace and remapping applied.
         topic = self.resolve_topic_name(spec.name)
         # Offered QoS goes into the bag so that `ros2 bag play` republishes `trajectory`
-        # transient-local, as the contract requires, and the streams best-effort.
+        # transient-local, as the contract requires, and the streams reliable.
         latched = spec == TRAJECTORY
         self.writer.add_topic(
-            topic, spec.msgtype, offered_qos=[LATCHED_QOS if latched else SENSOR_DATA_QOS]
+            topic, spec.msgtype, offered_qos=[LATCHED_QOS if latched else STREAM_QOS]
         )
         self.counts[topic] = 0
+        self._specs[topic] = spec
+        if not latched:
+            self.gaps[topic] = StreamGaps(pauses=spec in RUN_STREAMS)
+        self._subscribe(topic, qos.TRAJECTORY if latched else qos.RECORD)
+
+    def _subscribe(self, topic: str, profile: QoSProfile) -> None:
+        queue = self._queue
+        clock = self.get_clock()
 
         def on_message(data: bytes) -> None:
-            now_ns = self.get_clock().now().nanoseconds
-            self.writer.write(topic, data, now_ns, now_ns)
-            self.counts[topic] += 1
+            queue.append((topic, data, clock.now().nanoseconds))
 
-        profile = qos.TRAJECTORY if latched else qos.KEEP_EVERY_SAMPLE
+        spec = self._specs[topic]
         self._subscriptions_by_topic[topic] = self.create_subscription(
             message_class(spec.msgtype), spec.name, on_message, profile, raw=True
         )
 
+    def _adapt_qos(self) -> None:
+        """A topic with a best-effort publisher gets a best-effort subscription (said once).
+
+        A reliable subscription does not match a best-effort publisher, so a user's own driver
+        publishing with the sensor profile would be recorded as nothing at all.
+        """
+        for topic, spec in self._specs.items():
+            if spec == TRAJECTORY or topic in self._best_effort:
+                continue
+            offered = self.get_publishers_info_by_topic(topic)
+            if any(i.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT for i in offered):
+                self.destroy_subscription(self._subscriptions_by_topic.pop(topic))
+                self._subscribe(topic, qos.KEEP_EVERY_SAMPLE)
+                self._best_effort.add(topic)
+                self.get_logger().warning(
+                    f"{topic}: a publisher offers best effort only; recording it best effort, "
+                    "so samples lost on the way are not re-sent (they are counted as gaps)"
+                )
+
+    # -- writing (writer thread) ----------------------------------------------------------
+    def _write_loop(self) -> None:
+        try:
+            while True:
+                stopping = self._stop.is_set()
+                self._drain()
+                if stopping:
+                    return
+                self._stop.wait(_DRAIN_S)
+        except BaseException as exc:  # reported on /diagnostics; the bag keeps what it has
+            self._writer_error = exc
+            raise
+
+    def _drain(self) -> None:
+        queue = self._queue
+        self.queue_max = max(self.queue_max, len(queue))
+        while queue:
+            topic, data, now_ns = queue.popleft()
+            self.writer.write(topic, data, now_ns, now_ns)
+            self.counts[topic] += 1
+            gaps = self.gaps.get(topic)
+            if gaps is not None:
+                stamp_ns = header_stamp_ns(data)
+                if stamp_ns is not None:
+                    gaps.add(stamp_ns)
+
+    # -- reporting ------------------------------------------------------------------------
+    def loss_summary(self) -> dict[str, dict[str, Any]]:
+        """Per topic: samples written, samples lost, gaps, longest gap [s], learned period."""
+        return {
+            topic: {
+                "samples": self.counts[topic],
+                "lost": g.lost,
+                "gaps": g.gap_count,
+                "longest_gap_s": round(g.longest_s, 4),
+                "period_s": None if g.period_s is None else round(g.period_s, 6),
+            }
+            for topic, g in self.gaps.items()
+        }
+
+    def _store_losses(self) -> None:
+        summary = self.loss_summary()
+        self.writer.set_custom_data(
+            "samples_lost", json.dumps({t: s["lost"] for t, s in summary.items()})
+        )
+        self.writer.set_custom_data("gaps", json.dumps({t: s["gaps"] for t, s in summary.items()}))
+
     def _publish_diagnostics(self) -> None:
+        self._adapt_qos()
+        if not self.writer.closed:
+            self._store_losses()
         values: dict[str, object] = {"bag_path": str(self.bag_path)}
         values.update({f"count {t}": n for t, n in self.counts.items()})
+        lost = {t: g.lost for t, g in self.gaps.items()}
+        values.update({f"lost {t}": n for t, n in lost.items()})
+        values.update({f"gaps {t}": g.gap_count for t, g in self.gaps.items()})
+        values["queue_max"] = self.queue_max
+        values["best_effort_topics"] = ", ".join(sorted(self._best_effort))
         # Matched publishers per topic: a tool about to start a run waits until the recorder
         # hears every publisher, or the bag would miss the run's start (discovery takes seconds).
         values.update(
@@ -94,18 +200,31 @@ class RecorderNode(Node):
                 for t, s in self._subscriptions_by_topic.items()
             }
         )
+        level, message = diagnostics.OK, "recording"
+        if self._writer_error is not None:
+            level, message = diagnostics.ERROR, f"bag writer died: {self._writer_error!r}"
+        elif any(lost.values()):
+            level = diagnostics.WARN
+            message = "recording; lost " + ", ".join(f"{n} of {t}" for t, n in lost.items() if n)
         diagnostics.publish_status(
-            self._pub_diag, self, level=diagnostics.OK, message="recording", values=values
+            self._pub_diag, self, level=level, message=message, values=values
         )
 
     def close(self) -> None:
-        """Finish the bag (idempotent)."""
+        """Write what is queued, store the loss counts and finish the bag (idempotent)."""
+        self._stop.set()
+        self._writer_thread.join(10.0)
+        if not self.writer.closed:
+            self._store_losses()
+            lost = {t: g.lost for t, g in self.gaps.items() if g.lost}
+            if lost:
+                self.get_logger().warning(f"bag {self.bag_path} lacks samples: {lost}")
         self.writer.close()
 
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run catheter_control recorder``."""
-    code = run_node(RecorderNode, args)
+    code = run_node(RecorderNode, args, events_executor=True)
     if code:
         raise SystemExit(code)
 

@@ -17,7 +17,8 @@ from collections.abc import Callable, Sequence
 from types import FrameType
 
 import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
+from rclpy.experimental.events_executor import EventsExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
@@ -64,8 +65,15 @@ def run_nodes(
     *,
     until: Callable[[list[Node]], bool] | None = None,
     poll_s: float = 0.1,
+    events_executor: bool = False,
 ) -> int:
     """Run nodes in one process until a stop signal (or ``until(nodes)``); returns an exit code.
+
+    ``events_executor`` spins rclpy's EventsExecutor instead of the SingleThreadedExecutor, for
+    nodes whose work is taking many messages: it costs about a quarter of the CPU per message
+    (measured: 380 against 94 us per message at 1,250 messages/s, 220 against 60-77 us at
+    5,000), which decides whether a recorder keeps up on a busy 2-core machine. It is
+    rclpy's experimental executor, so only the recorder uses it.
 
     The nodes are built inside one rclpy context, in order; a :class:`CatheterError` while
     building one (a refused parameter, a model that fails its hash check) is logged as fatal
@@ -77,7 +85,7 @@ def run_nodes(
     sys.setswitchinterval(_SWITCH_INTERVAL_S)
     nodes: list[Node] = []
     with rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO):
-        executor = SingleThreadedExecutor()
+        executor: Executor = EventsExecutor() if events_executor else SingleThreadedExecutor()
         try:
             for factory in factories:
                 nodes.append(factory())
@@ -125,6 +133,7 @@ def run_node(
     *,
     until: Callable[[Node], bool] | None = None,
     poll_s: float = 0.1,
+    events_executor: bool = False,
 ) -> int:
     """Run one node: :func:`run_nodes` for a single factory."""
     return run_nodes(
@@ -132,4 +141,5 @@ def run_node(
         args,
         until=None if until is None else (lambda nodes: until(nodes[0])),
         poll_s=poll_s,
+        events_executor=events_executor,
     )

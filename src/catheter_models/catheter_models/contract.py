@@ -42,6 +42,12 @@ RECORDED_TOPICS: Final = (
 )
 """What the recorder writes by default (diagnostics are not science data)."""
 
+SENSOR_STREAMS: Final = (PRESSURE_MEASURED, TIP_DISTANCE, TIP_ANGLE)
+"""Published every sample for as long as the driver runs: any silence in them is lost data."""
+
+RUN_STREAMS: Final = (PRESSURE_COMMAND, ANGLE_DESIRED)
+"""Published every tick while a run lasts, and silent between runs (see ``gaps.PAUSE_S``)."""
+
 REQUIRED_BAG_TOPICS: Final = (PRESSURE_COMMAND, PRESSURE_MEASURED, TIP_ANGLE)
 """A bag holds at least these; tools that read a bag name anything missing and stop."""
 
