@@ -22,6 +22,9 @@ import time
 from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
+
+import numpy as np
 
 from catheter_control.models import COMPENSATORS, DEFAULT_COMPENSATOR, SHIPPED
 from catheter_control.trajectory import (
@@ -32,8 +35,9 @@ from catheter_control.trajectory import (
     with_lead_in,
 )
 from catheter_driver.laser_core import Calibration
-from catheter_models.contract import DEFAULT_NAMESPACE
+from catheter_models.contract import ANGLE_DESIRED, DEFAULT_NAMESPACE, TIP_ANGLE
 from catheter_models.errors import CatheterError
+from catheter_models.gaps import describe_gaps, find_gaps
 from catheter_models.signals import TEST_TRAJECTORIES, get_preset
 
 _PLANT_STRAIGHT_DISTANCE_M = 0.065
@@ -295,7 +299,9 @@ def _run(
                 elif status.name.endswith("recorder"):
                     data.recorder = values
 
-        node.create_subscription(JointState, ANGLE_DESIRED.name, on_desired, qos.KEEP_EVERY_SAMPLE)
+        # Our compensator's stream: reliable, so the score misses nothing on a busy host. The
+        # sensor may be anyone's driver: best effort matches whatever it offers.
+        node.create_subscription(JointState, ANGLE_DESIRED.name, on_desired, qos.RECORD)
         node.create_subscription(JointState, TIP_ANGLE.name, on_measured, qos.KEEP_EVERY_SAMPLE)
         node.create_subscription(DiagnosticArray, DIAGNOSTICS.name, on_diag, 10)
         pub = node.create_publisher(JointTrajectory, TRAJECTORY.name, qos.TRAJECTORY)
@@ -438,6 +444,9 @@ def _run(
         [v for t, v in data.driver if t >= first],
     )
     print(timing_text(timing))
+    losses = _losses(data, bag_path)
+    for line in losses["said"]:
+        print(line, file=sys.stderr)
     run_dir.mkdir(parents=True, exist_ok=True)
     plot = save_plot(result, run_dir / "tracking.png", f"{plan.name}: desired vs measured")
     save_json(
@@ -450,6 +459,10 @@ def _run(
             "stopped": data.stopped,
             "lead_in_s": lead_s,
             "timing": timing,
+            # Samples missing from the bag (the recorder's counts, by topic) and from the
+            # streams this run was scored on (from their stamps).
+            "bag_samples_lost": losses["bag"],
+            "scored_samples_lost": losses["scored"],
             # The compensator's 1 Hz reports over the run: where in it deadlines were missed.
             "timing_series": [
                 {
@@ -479,6 +492,38 @@ def _run(
         )
         return EXIT_STOPPED
     return 0
+
+
+def _losses(data: _Collected, bag_path: Path | None) -> dict[str, Any]:
+    """What the bag and the score lack: counts by topic, and lines for a person.
+
+    The bag's counts are the recorder's at its last report (1 Hz); the bag's own
+    ``custom_data`` has the final ones.
+    """
+    said: list[str] = []
+    bag: dict[str, int] = {}
+    if bag_path is not None:
+        prefix = "lost "
+        bag = {k[len(prefix) :]: int(v) for k, v in data.recorder.items() if k.startswith(prefix)}
+        if not data.recorder:
+            said.append("follow_trajectory: no report from the recorder; the bag is unchecked")
+        elif any(bag.values()):
+            said.append(
+                "follow_trajectory: the bag lacks samples: "
+                + ", ".join(f"{n} of {t}" for t, n in bag.items() if n)
+            )
+    scored: dict[str, int] = {}
+    for name, series, pauses in (
+        (ANGLE_DESIRED.name, data.desired, True),
+        (TIP_ANGLE.name, data.measured, False),
+    ):
+        t_s = np.frombuffer(series.t_s, dtype=float)
+        _period, found = find_gaps(t_s, pauses=pauses)
+        scored[name] = sum(m for _, _, m in found)
+        line = describe_gaps(name, t_s, pauses=pauses, origin_s=float(t_s[0]) if t_s.size else 0.0)
+        if line is not None:
+            said.append(f"follow_trajectory: scored without them: {line}")
+    return {"bag": bag, "scored": scored, "said": said}
 
 
 def entry() -> None:

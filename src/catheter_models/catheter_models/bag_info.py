@@ -1,4 +1,7 @@
-"""A person-readable summary of a bag: topics, types, counts, rates, duration, custom_data.
+"""A person-readable summary of a bag: topics, types, counts, rates, duration, gaps, custom_data.
+
+Gaps are found from the header stamps of every stream (``catheter_models.gaps``), so a bag
+that a recorder without gap counting wrote, or one written elsewhere, is judged too.
 
 A truncated bag is summarised too (from the complete records), with the repair command, since
 that is exactly when someone runs ``catheter-lab bag info``.
@@ -17,8 +20,17 @@ from rosbags.rosbag2 import ReaderError as Rosbag2ReaderError
 from catheter_models.bag_messages import kilted_typestore
 from catheter_models.bag_metadata import bag_custom_data, locate_bag
 from catheter_models.bag_scan import REPAIR_COMMAND, MessageSink, has_footer, scan_mcap
+from catheter_models.contract import RUN_STREAMS
 from catheter_models.errors import BagError
+from catheter_models.gaps import StreamGaps, header_stamp_ns
 from catheter_models.units import NS_PER_S
+
+_STAMPED_STREAMS = {
+    "sensor_msgs/msg/FluidPressure",
+    "sensor_msgs/msg/JointState",
+    "sensor_msgs/msg/Range",
+}
+"""Stream types whose first field is a header stamp (the contract's streams)."""
 
 
 @dataclass
@@ -27,8 +39,13 @@ class _TopicStats:
     count: int = 0
     first_ns: int | None = None
     last_ns: int | None = None
+    gaps: StreamGaps | None = None
 
-    def add(self, log_time_ns: int) -> None:
+    def add(self, log_time_ns: int, data: bytes | None = None) -> None:
+        if self.gaps is not None and data is not None:
+            stamp_ns = header_stamp_ns(data)
+            if stamp_ns is not None:
+                self.gaps.add(stamp_ns)
         self.count += 1
         self.first_ns = log_time_ns if self.first_ns is None else min(self.first_ns, log_time_ns)
         self.last_ns = log_time_ns if self.last_ns is None else max(self.last_ns, log_time_ns)
@@ -61,7 +78,9 @@ def bag_info(path: Path | str) -> str:
             scan = scan_mcap(mcap_file, on_message=_counter(stats))
             for channel in scan.channels.values():
                 schema = scan.schemas.get(channel.schema_id)
-                stats.setdefault(channel.topic, _TopicStats(schema.name if schema else "?"))
+                stats.setdefault(
+                    channel.topic, _new_stats(channel.topic, schema.name if schema else "?")
+                )
             lost += scan.bytes_discarded
         header.append(
             f"TRUNCATED: {', '.join(f.name for f in truncated)} has no MCAP footer "
@@ -72,19 +91,28 @@ def bag_info(path: Path | str) -> str:
         try:
             with AnyReader([layout.reader_path()], default_typestore=kilted_typestore()) as reader:
                 for conn in reader.connections:
-                    stats.setdefault(conn.topic, _TopicStats(conn.msgtype))
-                for conn, log_ns, _raw in reader.messages():
-                    stats[conn.topic].add(log_ns)
+                    stats.setdefault(conn.topic, _new_stats(conn.topic, conn.msgtype))
+                for conn, log_ns, raw in reader.messages():
+                    stats[conn.topic].add(log_ns, raw)
         except (AnyReaderError, Rosbag2ReaderError) as exc:
             msg = f"bag {layout.path} cannot be read as a rosbag2 bag: {exc}"
             raise BagError(msg) from None
     return "\n".join(header + _format(layout.path, stats, bag_custom_data(layout)))
 
 
+def _new_stats(topic: str, msgtype: str) -> _TopicStats:
+    if msgtype not in _STAMPED_STREAMS:
+        return _TopicStats(msgtype)
+    pauses = any(topic.endswith("/" + s.name) or topic == s.name for s in RUN_STREAMS)
+    return _TopicStats(msgtype, gaps=StreamGaps(pauses=pauses))
+
+
 def _counter(stats: dict[str, _TopicStats]) -> MessageSink:
     def count(channel: Channel, schema: Schema | None, message: Message) -> None:
-        entry = stats.setdefault(channel.topic, _TopicStats(schema.name if schema else "?"))
-        entry.add(message.log_time)
+        entry = stats.setdefault(
+            channel.topic, _new_stats(channel.topic, schema.name if schema else "?")
+        )
+        entry.add(message.log_time, message.data)
 
     return count
 
@@ -106,6 +134,16 @@ def _format(path: Path, stats: dict[str, _TopicStats], custom: dict[str, str]) -
         lines.append(
             f"  {topic:<{width}}  {s.msgtype:<{type_width}}  {s.count:>8} msgs  {rate:>10}"
         )
+    checked = {t: s.gaps for t, s in sorted(stats.items()) if s.gaps is not None}
+    if checked:
+        lines.append("gaps (from header stamps):")
+    for topic, g in checked.items():
+        said = (
+            f"lost {g.lost} samples in {g.gap_count} gap(s), longest {g.longest_s * 1e3:.0f} ms"
+            if g.lost
+            else "none"
+        )
+        lines.append(f"  {topic:<{width}}  {said}")
     lines.append("custom_data:" if custom else "custom_data: (none)")
     lines += [f"  {key}: {value}" for key, value in sorted(custom.items())]
     return lines

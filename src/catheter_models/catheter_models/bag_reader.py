@@ -37,12 +37,14 @@ from catheter_models.contract import (
     PRESSURE_COMMAND,
     PRESSURE_MEASURED,
     REQUIRED_BAG_TOPICS,
+    RUN_STREAMS,
     TIP_ANGLE,
     TIP_DISTANCE,
     TopicSpec,
     qualify,
 )
 from catheter_models.errors import BagError, MissingTopicError, ParameterError
+from catheter_models.gaps import describe_gaps
 from catheter_models.units import AMBIENT_PRESSURE_PA, NS_PER_S
 
 FloatArray = npt.NDArray[np.float64]
@@ -167,6 +169,20 @@ class BagData:
     def tip_distance(self) -> StampedSeries | None:
         """``tip/distance`` [m], or None if the bag has no such topic."""
         return self.series.get(TIP_DISTANCE.name)
+
+    def gap_report(self) -> list[str]:
+        """One line per loaded stream that lacks samples, by its stamps (empty: none does).
+
+        Command streams stop between runs; only silences shorter than ``gaps.PAUSE_S`` in them
+        count (see :mod:`catheter_models.gaps`).
+        """
+        pausing = {s.name for s in RUN_STREAMS}
+        lines = []
+        for name, series in self.series.items():
+            line = describe_gaps(name, series.t_s, pauses=name in pausing)
+            if line is not None:
+                lines.append(line)
+        return lines
 
     def _get(self, name: str) -> StampedSeries:
         try:

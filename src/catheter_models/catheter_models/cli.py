@@ -34,11 +34,13 @@ import argparse
 import json
 import sys
 import time
+import warnings
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from catheter_models.errors import CatheterError
+from catheter_models.gaps import BagGapWarning
 
 if TYPE_CHECKING:
     from catheter_models.plant import PlantConfig
@@ -592,9 +594,17 @@ def main(argv: list[str] | None = None) -> None:
     command = " ".join(
         str(v) for v in (args.command, getattr(args, "bag_command", None)) if v is not None
     )
-    try:
-        code = args.func(args)
-    except (CatheterError, OSError) as exc:
-        print(f"catheter-lab {command}: {exc}", file=sys.stderr)
-        code = 2
+
+    def show(message: Warning | str, category: type[Warning], *_: object, **__: object) -> None:
+        print(f"catheter-lab {command}: warning: {message}", file=sys.stderr)
+
+    with warnings.catch_warnings():
+        # Every gap in every input is said, once per bag and stream, in the command's voice.
+        warnings.simplefilter("always", BagGapWarning)
+        warnings.showwarning = show
+        try:
+            code = args.func(args)
+        except (CatheterError, OSError) as exc:
+            print(f"catheter-lab {command}: {exc}", file=sys.stderr)
+            code = 2
     sys.exit(code)

@@ -10,6 +10,7 @@ and tests that need many signals fast; it yields the same ``Recording`` a bag do
 from __future__ import annotations
 
 import hashlib
+import warnings
 from collections.abc import Iterable, Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -20,6 +21,7 @@ from catheter_models.bag_metadata import locate_bag
 from catheter_models.bag_reader import load_bag
 from catheter_models.contract import PRESSURE_COMMAND, SENSOR_RATE_HZ, TIP_ANGLE
 from catheter_models.errors import BagError, MissingTopicError
+from catheter_models.gaps import BagGapWarning
 from catheter_models.models.base import Recording
 from catheter_models.plant import Plant, PlantConfig
 from catheter_models.signals import SignalSpec, get_preset
@@ -39,6 +41,9 @@ def bag_sha256(path: Path | str) -> str:
 def recording_from_bag(path: Path | str, rate_hz: float = SENSOR_RATE_HZ) -> Recording:
     """Load the valve command and the measured angle of a bag on a uniform ``rate_hz`` grid.
 
+    Warns:
+        BagGapWarning: A stream lacks samples (one warning per stream, naming the gaps).
+
     Raises:
         MissingTopicError: The bag lacks ``pressure/command`` or ``tip/angle``: it does not fit
             the models' signals (the message names the topic and lists the bag's).
@@ -53,6 +58,13 @@ def recording_from_bag(path: Path | str, rate_hz: float = SENSOR_RATE_HZ) -> Rec
             f"{path} does not fit the models' signals (input {PRESSURE_COMMAND.name}, "
             f"output {TIP_ANGLE.name}): {exc}"
         ) from None
+    # The uniform grid interpolates across a gap: say so, naming where, so nobody trains on
+    # made-up samples without knowing.
+    for line in data.gap_report():
+        warnings.warn(
+            BagGapWarning(f"{path}: {line}; the {rate_hz:g} Hz grid interpolates across it"),
+            stacklevel=2,
+        )
     aligned = data.aligned(rate_hz=rate_hz)
     if len(aligned) < 2:
         raise BagError(f"{path}: the model streams overlap for {len(aligned)} sample(s) only")
