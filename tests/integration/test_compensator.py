@@ -27,11 +27,11 @@ from graph_utils import (
     statuses,
     trajectory_msg,
 )
-from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import FluidPressure, JointState
 from trajectory_msgs.msg import JointTrajectory
 
 from catheter_control import qos
+from catheter_control.qos import RECORD, STREAM
 from catheter_models.contract import (
     ANGLE_DESIRED,
     DIAGNOSTICS,
@@ -177,16 +177,16 @@ def test_tip_angle_stopping_ramps_the_pressure_down_and_says_why(
     )
     with Probe(children.domain_id) as probe:
         relay_on = True
-        angle_pub = probe.node.create_publisher(JointState, TIP_ANGLE.name, qos_profile_sensor_data)
+        angle_pub = probe.node.create_publisher(JointState, TIP_ANGLE.name, STREAM)
 
         def relay(msg: JointState) -> None:
             if relay_on:
                 angle_pub.publish(msg)
 
-        probe.node.create_subscription(JointState, RAW_ANGLE, relay, qos_profile_sensor_data)
-        commands = probe.subscribe(FluidPressure, PRESSURE_COMMAND.name, qos_profile_sensor_data)
-        desired = probe.subscribe(JointState, ANGLE_DESIRED.name, qos_profile_sensor_data)
-        measured = probe.subscribe(FluidPressure, PRESSURE_MEASURED.name, qos_profile_sensor_data)
+        probe.node.create_subscription(JointState, RAW_ANGLE, relay, RECORD)
+        commands = probe.subscribe(FluidPressure, PRESSURE_COMMAND.name, RECORD)
+        desired = probe.subscribe(JointState, ANGLE_DESIRED.name, RECORD)
+        measured = probe.subscribe(FluidPressure, PRESSURE_MEASURED.name, RECORD)
         diags = probe.subscribe(DiagnosticArray, DIAGNOSTICS.name, 10)
         pub = probe.node.create_publisher(JointTrajectory, TRAJECTORY.name, qos.TRAJECTORY)
         _wait_ready(probe, pub, diags, children)

@@ -44,12 +44,12 @@ from graph_utils import (
     trajectory_msg,
     wait_for_recorder,
 )
-from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import FluidPressure
 from trajectory_msgs.msg import JointTrajectory
 
 from catheter_control import qos
 from catheter_control.bringup import ProcessGraph, sim_graph_specs
+from catheter_control.qos import RECORD, STREAM
 from catheter_driver import messages
 from catheter_models.bag import load_bag
 from catheter_models.contract import (
@@ -127,12 +127,8 @@ class SimGraph:
         self.graph: ProcessGraph = children.graph(specs)
         self.children = children
         self.probe = Probe(children.domain_id).__enter__()
-        self.commands = self.probe.subscribe(
-            FluidPressure, PRESSURE_COMMAND.name, qos_profile_sensor_data
-        )
-        self.measured = self.probe.subscribe(
-            FluidPressure, PRESSURE_MEASURED.name, qos_profile_sensor_data
-        )
+        self.commands = self.probe.subscribe(FluidPressure, PRESSURE_COMMAND.name, RECORD)
+        self.measured = self.probe.subscribe(FluidPressure, PRESSURE_MEASURED.name, RECORD)
         self.diags = self.probe.subscribe(DiagnosticArray, DIAGNOSTICS.name, 10)
         self.pub = self.probe.node.create_publisher(
             JointTrajectory, TRAJECTORY.name, qos.TRAJECTORY
@@ -302,8 +298,8 @@ def test_killed_launcher_takes_its_graph_down_cleanly(
         ],
     )
     with Probe(children.domain_id) as probe:
-        commands = probe.subscribe(FluidPressure, PRESSURE_COMMAND.name, qos_profile_sensor_data)
-        measured = probe.subscribe(FluidPressure, PRESSURE_MEASURED.name, qos_profile_sensor_data)
+        commands = probe.subscribe(FluidPressure, PRESSURE_COMMAND.name, RECORD)
+        measured = probe.subscribe(FluidPressure, PRESSURE_MEASURED.name, RECORD)
         assert probe.spin_until(
             lambda: len(measured) > 25 and gauge_pa(measured[-25:]).mean() > 1.5e5, 60.0
         ), children.all_logs()
@@ -351,9 +347,7 @@ def test_a_run_stopped_part_way_is_not_reported_as_a_success(
     )
     try:
         with Probe(children.domain_id) as probe:
-            measured = probe.subscribe(
-                FluidPressure, PRESSURE_MEASURED.name, qos_profile_sensor_data
-            )
+            measured = probe.subscribe(FluidPressure, PRESSURE_MEASURED.name, RECORD)
             assert probe.spin_until(
                 lambda: len(measured) > 25 and gauge_pa(measured[-25:]).mean() > 1.5e5, 60.0
             )
@@ -410,13 +404,9 @@ class Driver:
     def __init__(self, children: Children) -> None:
         children.start("sim_hardware", node_argv("catheter_driver.sim_hardware_node"))
         self.probe = Probe(children.domain_id).__enter__()
-        self.measured = self.probe.subscribe(
-            FluidPressure, PRESSURE_MEASURED.name, qos_profile_sensor_data
-        )
+        self.measured = self.probe.subscribe(FluidPressure, PRESSURE_MEASURED.name, RECORD)
         self.diags = self.probe.subscribe(DiagnosticArray, DIAGNOSTICS.name, 10)
-        self.pub = self.probe.node.create_publisher(
-            FluidPressure, PRESSURE_COMMAND.name, qos_profile_sensor_data
-        )
+        self.pub = self.probe.node.create_publisher(FluidPressure, PRESSURE_COMMAND.name, STREAM)
         self.clock = self.probe.node.get_clock()
         ready = self.probe.spin_until(
             lambda: self.pub.get_subscription_count() > 0 and len(self.measured) > 25, 30.0
@@ -641,7 +631,7 @@ def test_tampered_model_is_refused_at_start(
     before = {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in model.iterdir()}
     name = TAMPERINGS[how](model)
     with Probe(children.domain_id) as probe:
-        commands = probe.subscribe(FluidPressure, PRESSURE_COMMAND.name, qos_profile_sensor_data)
+        commands = probe.subscribe(FluidPressure, PRESSURE_COMMAND.name, RECORD)
         t0 = time.monotonic()
         result = children.run(
             "compensator",
