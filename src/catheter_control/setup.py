@@ -40,6 +40,7 @@ setup(
             "excite = catheter_control.excite_node:main",
             "follow_trajectory = catheter_control.follow_trajectory:entry",
             "bringup = catheter_control.bringup:main",
+            "bag_play = catheter_control.bag_play:entry",
         ],
     },
 )

@@ -1,0 +1,294 @@
+"""``bag_play``: publish a recorded bag over DDS with its recorded timing and offered QoS.
+
+A session recorded once can be replayed into a running recorder, into the compensator (its
+``trajectory``), into Foxglove, or into anything that learns from topics::
+
+    ros2 run catheter_control bag_play bags/training --rate 2 --topics pressure/command tip/angle
+    bag_play runs/x/bag --start-offset-s 10 --loop --remap /catheter/tip/angle:=/replay/angle
+
+Messages go out as recorded (the serialized bytes, header stamps untouched), spaced by their
+recorded log times divided by ``--rate``. Each topic is published with the QoS its publisher
+offered when it was recorded (streams reliable, ``trajectory`` transient local), so a reliable
+recorder matches and gets every message. ``--wait-for-subscribers-s`` holds the start until
+every topic has a subscriber (discovery takes seconds, and a recorder that has not matched yet
+would miss the start). Ctrl-C stops cleanly after the message in flight and says how far it got.
+
+Exit codes: 0 played to the end (or stopped by Ctrl-C), 2 refused (unreadable bag, no such
+topic, bad option).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from catheter_models.bag_messages import kilted_typestore
+from catheter_models.bag_metadata import locate_bag
+from catheter_models.errors import BagError, CatheterError, ParameterError
+
+EXIT_REFUSED = 2
+
+
+@dataclass(frozen=True)
+class _Topic:
+    name: str
+    """As recorded."""
+    out: str
+    """As published (after ``--remap``)."""
+    msgtype: str
+    qos: dict[str, Any]
+    """Offered QoS as recorded: reliability, durability, depth."""
+
+
+def _parse(argv: Sequence[str]) -> argparse.Namespace:
+    p = argparse.ArgumentParser(
+        prog="bag_play", description="Publish a recorded bag over DDS with its timing and QoS."
+    )
+    p.add_argument("bag", type=Path, help="bag directory or .mcap file")
+    p.add_argument("--rate", type=float, default=1.0, help="playback speed factor (2: twice)")
+    p.add_argument(
+        "--start-offset-s", type=float, default=0.0, help="skip this much of the bag's start [s]"
+    )
+    p.add_argument("--loop", action="store_true", help="play again from the start until Ctrl-C")
+    p.add_argument(
+        "--topics",
+        nargs="+",
+        default=None,
+        metavar="TOPIC",
+        help="only these (full names, or names relative to the bag's namespace)",
+    )
+    p.add_argument(
+        "--remap",
+        action="append",
+        default=[],
+        metavar="FROM:=TO",
+        help="publish the recorded topic FROM on TO (full names)",
+    )
+    p.add_argument(
+        "--wait-for-subscribers-s",
+        type=float,
+        default=0.0,
+        help="wait up to this long until every topic has a subscriber before starting [s]",
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    args = p.parse_args(argv)
+    if not (args.rate > 0.0 and args.rate < float("inf")):
+        raise ParameterError(f"--rate must be a positive factor, got {args.rate}")
+    if not args.start_offset_s >= 0.0:
+        raise ParameterError(f"--start-offset-s must be >= 0, got {args.start_offset_s}")
+    if not args.wait_for_subscribers_s >= 0.0:
+        raise ParameterError(
+            f"--wait-for-subscribers-s must be >= 0, got {args.wait_for_subscribers_s}"
+        )
+    return args
+
+
+def _remaps(pairs: Sequence[str]) -> dict[str, str]:
+    out = {}
+    for pair in pairs:
+        src, sep, dst = pair.partition(":=")
+        if not sep or not src.startswith("/") or not dst.startswith("/"):
+            raise ParameterError(f"--remap {pair!r}: expected /from/topic:=/to/topic")
+        out[src] = dst
+    return out
+
+
+def _qos_dict(profiles: Sequence[Any]) -> dict[str, Any]:
+    """The first offered profile as plain values (rosbags' Qos objects)."""
+    if not profiles:
+        # A bag without offered QoS (some writers leave it out): what our streams offer.
+        return {"reliability": "reliable", "durability": "volatile", "depth": 500}
+    q = profiles[0]
+    return {
+        "reliability": q.reliability.name.lower(),
+        "durability": q.durability.name.lower(),
+        "depth": max(1, int(q.depth)),
+    }
+
+
+def _select(connections: Sequence[Any], wanted: Sequence[str] | None) -> list[Any]:
+    if wanted is None:
+        return list(connections)
+    chosen = []
+    names = sorted({c.topic for c in connections})
+    for w in wanted:
+        hits = [c for c in connections if c.topic == w or c.topic.endswith("/" + w.lstrip("/"))]
+        if not hits:
+            raise BagError(f"the bag has no topic {w!r}; it has {', '.join(names)}")
+        chosen += [c for c in hits if c not in chosen]
+    return chosen
+
+
+class Player:
+    """Reads a bag's messages in log-time order, with each topic's offered QoS.
+
+    Args:
+        bag: bag directory or ``.mcap`` file.
+        topics: only these (full or namespace-relative names); None: all.
+        remap: recorded name -> published name.
+    """
+
+    def __init__(
+        self,
+        bag: Path,
+        topics: Sequence[str] | None = None,
+        remap: dict[str, str] | None = None,
+    ) -> None:
+        from rosbags.highlevel import AnyReader, AnyReaderError
+        from rosbags.rosbag2 import ReaderError
+
+        self.layout = locate_bag(bag)
+        self._reader_path = self.layout.reader_path()
+        remap = remap or {}
+        try:
+            with AnyReader([self._reader_path], default_typestore=kilted_typestore()) as reader:
+                self.connections = _select(reader.connections, topics)
+                self.topics = {
+                    c.topic: _Topic(
+                        c.topic,
+                        remap.get(c.topic, c.topic),
+                        c.msgtype,
+                        _qos_dict(getattr(c.ext, "offered_qos_profiles", [])),
+                    )
+                    for c in self.connections
+                }
+                self.count = sum(c.msgcount for c in self.connections)
+                self.start_ns = reader.start_time
+                self.end_ns = reader.end_time
+        except (AnyReaderError, ReaderError) as exc:
+            raise BagError(f"bag {self.layout.path} cannot be read: {exc}") from None
+        unknown = set(remap) - set(self.topics)
+        if unknown:
+            raise ParameterError(
+                f"--remap names {', '.join(sorted(unknown))}, not among the topics played: "
+                f"{', '.join(sorted(self.topics))}"
+            )
+
+    @property
+    def duration_s(self) -> float:
+        """From the first to the last log time [s]."""
+        return (self.end_ns - self.start_ns) * 1e-9
+
+    def messages(self, start_offset_s: float = 0.0) -> Iterator[tuple[str, int, bytes]]:
+        """(recorded topic, log time [ns], serialized message), in log-time order."""
+        from rosbags.highlevel import AnyReader
+
+        first_ns = self.start_ns + round(start_offset_s * 1e9)
+        with AnyReader([self._reader_path], default_typestore=kilted_typestore()) as reader:
+            wanted = [c for c in reader.connections if c.topic in self.topics]
+            for conn, log_ns, raw in reader.messages(connections=wanted, start=first_ns):
+                yield conn.topic, log_ns, bytes(raw)
+
+
+def _profile(qos: dict[str, Any]) -> Any:
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=qos["depth"],
+        reliability=ReliabilityPolicy.RELIABLE
+        if qos["reliability"] == "reliable"
+        else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL
+        if qos["durability"] == "transient_local"
+        else DurabilityPolicy.VOLATILE,
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point; returns the exit code."""
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
+    from rclpy.utilities import remove_ros_args
+
+    from catheter_driver.messages import message_class
+    from catheter_driver.node_main import install_stop_handlers
+
+    argv = sys.argv if argv is None else ["bag_play", *argv]
+    try:
+        args = _parse(remove_ros_args(argv)[1:])
+        player = Player(args.bag, args.topics, _remaps(args.remap))
+    except (CatheterError, OSError) as exc:
+        print(f"bag_play: {exc}", file=sys.stderr)
+        return EXIT_REFUSED
+    stop = install_stop_handlers()
+    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        node = rclpy.create_node("bag_play")
+        pubs: dict[str, Any] = {
+            t.name: node.create_publisher(message_class(t.msgtype), t.out, _profile(t.qos))
+            for t in player.topics.values()
+        }
+        for t in player.topics.values():
+            node.get_logger().info(
+                f"{t.name} -> {t.out} ({t.msgtype}, {t.qos['reliability']}, "
+                f"{t.qos['durability']}, depth {t.qos['depth']})"
+            )
+        if args.wait_for_subscribers_s > 0.0:
+            until = time.monotonic() + args.wait_for_subscribers_s
+            while time.monotonic() < until and not stop.is_set():
+                if all(p.get_subscription_count() > 0 for p in pubs.values()):
+                    break
+                stop.wait(0.05)
+            lonely = [n for n, p in pubs.items() if p.get_subscription_count() == 0]
+            if lonely:
+                node.get_logger().warning(f"starting with no subscriber on {', '.join(lonely)}")
+        span_s = max(0.0, player.duration_s - args.start_offset_s)
+        played = 0
+        rounds = 0
+        while not stop.is_set():
+            rounds += 1
+            bar = tqdm(
+                total=round(span_s, 1),
+                unit="s",
+                desc=f"bag_play x{args.rate:g}" + (f" (round {rounds})" if args.loop else ""),
+                disable=args.no_progress,
+                bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:.1f} s bag time",
+            )
+            t0_s = time.monotonic()
+            base_ns: int | None = None
+            shown_s = 0.0
+            for topic, log_ns, raw in player.messages(args.start_offset_s):
+                base_ns = log_ns if base_ns is None else base_ns
+                bag_s = (log_ns - base_ns) * 1e-9
+                wait_s = t0_s + bag_s / args.rate - time.monotonic()
+                if wait_s > 0.0 and stop.wait(wait_s):
+                    break
+                pubs[topic].publish(raw)
+                played += 1
+                target_s = min(round(bag_s, 1), bar.total)
+                if target_s > shown_s:
+                    bar.update(round(target_s - shown_s, 1))
+                    shown_s = target_s
+            bar.close()
+            if not args.loop:
+                break
+        how = "stopped" if stop.is_set() else "played"
+        print(
+            f"bag_play: {how}: {played} messages on {len(pubs)} topics from {player.layout.path}"
+            + (f" ({rounds} rounds)" if args.loop else ""),
+            file=sys.stderr,
+        )
+        # Reliable publishers keep what a subscriber has not acknowledged yet: give it a
+        # moment to ask, rather than destroy the history under it.
+        time.sleep(0.5)
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown()
+    return 0
+
+
+def entry() -> None:
+    """Console-script wrapper."""
+    sys.exit(main())
+
+
+if __name__ == "__main__":
+    entry()
