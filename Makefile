@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 PY := $(BIN)/python
 PRESET ?= traj_descending_sine
 
-.PHONY: setup demo test test-fast test-slow lint typecheck bench bench-models soak faults lab-example figures \
+.PHONY: setup demo test test-loaded test-fast test-slow lint typecheck bench bench-models soak faults lab-example figures \
 	sample-bags shipped-models colcon clean
 
 setup: $(VENV)/.installed
@@ -22,6 +22,10 @@ demo: setup
 ## All tests, the slow integration tests included (this is what .ci/run calls).
 test: setup
 	$(BIN)/pytest -m "slow or not slow"
+
+## All tests beside two busy-loop processes: the suite must hold on a shared machine.
+test-loaded: setup
+	scripts/with_cpu_hogs.sh 2 $(BIN)/pytest -m "slow or not slow"
 
 ## Fast tests only (no DDS graph, no colcon build).
 test-fast: setup

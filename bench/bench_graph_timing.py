@@ -9,7 +9,9 @@ once per control rate, and reads back what the nodes themselves measured on /dia
 * compute p99: time in the tick body (set-point, model step, clamp, slew, two publishes);
 * command latency: receipt at the driver (sim_hardware) minus the command's stamp, which is
   the tick's deadline: tick to publish to DDS to the driver's callback (p50, p99, max);
-* tracking RMSE of tip/angle against angle/desired, to show the faster loop costs nothing.
+* tracking RMSE of tip/angle against angle/desired, to show the faster loop costs nothing;
+* samples the bag lacks per stream: the recorder's own count (custom_data) beside a count
+  from the header stamps read back with the ``mcap`` reader.
 
 The baselines are the thesis's 250 Hz loop, the 1 kHz graph with its loops at normal
 scheduling (``--rt-priority 0``: what a node falls back to where the OS refuses SCHED_FIFO),
@@ -19,11 +21,12 @@ The 1 kHz row is the same graph four times as fast
 (the 250 Hz c-LSTM stepped at its own rate, interpolated between samples; see
 ``catheter_control.control_core``).
 
-    .venv/bin/python bench/bench_graph_timing.py            # 4 x 60 s, about 5 minutes
-    .venv/bin/python bench/bench_graph_timing.py --quick    # 4 x 10 s smoke run
+    .venv/bin/python bench/bench_graph_timing.py            # 6 x 60 s, about 8 minutes
+    .venv/bin/python bench/bench_graph_timing.py --quick    # 6 x 10 s smoke run
 
 Writes ``bench/results/graph_timing.json`` (``--quick``: ``graph_timing.quick.json``).
-Run it on an otherwise idle machine: the graph shares 2 cores with anything else running.
+Run it on an otherwise idle machine: the graph shares 2 cores with anything else running
+(the loaded rows start their own busy loops).
 """
 
 from __future__ import annotations
@@ -45,15 +48,18 @@ from catheter_control.trajectory import preset_knots
 
 REPO = Path(__file__).resolve().parents[1]
 RESULTS = REPO / "bench" / "results"
-RUNS: tuple[tuple[str, float, int | None, dict[str, str]], ...] = (
-    ("250 Hz", 250.0, None, {}),
-    ("1 kHz", 1000.0, None, {}),
-    ("1 kHz, no real-time scheduling", 1000.0, 0, {}),
-    ("1 kHz, collector not frozen", 1000.0, None, {"CATHETER_GC_FREEZE": "0"}),
+RUNS: tuple[tuple[str, float, int | None, dict[str, str], int], ...] = (
+    ("250 Hz", 250.0, None, {}, 0),
+    ("1 kHz", 1000.0, None, {}, 0),
+    ("250 Hz, two CPU hogs", 250.0, None, {}, 2),
+    ("1 kHz, two CPU hogs", 1000.0, None, {}, 2),
+    ("1 kHz, no real-time scheduling", 1000.0, 0, {}, 0),
+    ("1 kHz, collector not frozen", 1000.0, None, {"CATHETER_GC_FREEZE": "0"}, 0),
 )
-"""(label, control rate, rt_priority, environment): the graph as shipped (its loops SCHED_FIFO
-50, start-up's objects frozen out of the garbage collector) at both rates; then two
-baselines at 1 kHz: normal scheduling, what a node falls back to where the OS refuses
+"""(label, control rate, rt_priority, environment, busy loops beside it): the graph as shipped
+(its loops SCHED_FIFO 50, start-up's objects frozen out of the garbage collector) at both
+rates, idle and with two busy-loop processes on the two cores (a lab PC doing other work);
+then two baselines at 1 kHz: normal scheduling, what a node falls back to where the OS refuses
 real-time priority, and the collector left to scan start-up's objects (a full collection
 holds the GIL for ~26 ms in the compensator)."""
 MISSED_TARGET = 0.001
@@ -87,8 +93,10 @@ def run_once(
     domain_id: int,
     *,
     extra_env: dict[str, str] | None = None,
+    hogs: int = 0,
 ) -> dict[str, Any]:
-    """One ``follow_trajectory --sim`` run at ``rate_hz``; its report.json, plus wall time."""
+    """One ``follow_trajectory --sim`` run at ``rate_hz``; its report.json, plus wall time
+    and what the bag lacks (the recorder's own counts, and stamps read back independently)."""
     env = {
         **os.environ,
         **(extra_env or {}),
@@ -110,9 +118,17 @@ def run_once(
         "--no-progress",
         *([] if rt_priority is None else ["--rt-priority", str(rt_priority)]),
     ]
-    start = time.monotonic()
-    proc = subprocess.run(argv, check=False, env=env, capture_output=True, text=True, timeout=300)
-    wall_s = time.monotonic() - start
+    busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(hogs)]
+    try:
+        start = time.monotonic()
+        proc = subprocess.run(
+            argv, check=False, env=env, capture_output=True, text=True, timeout=600
+        )
+        wall_s = time.monotonic() - start
+    finally:
+        for hog in busy:
+            hog.kill()
+            hog.wait()
     if proc.returncode != 0:
         raise RuntimeError(
             f"follow_trajectory at {rate_hz:g} Hz failed ({proc.returncode}):\n"
@@ -121,7 +137,37 @@ def run_once(
     print(proc.stdout)
     report: dict[str, Any] = json.loads((out / "report.json").read_text())
     report["wall_s"] = wall_s
+    report["bag_lost"] = bag_losses(out / "bag")
     return report
+
+
+def bag_losses(bag: Path) -> dict[str, dict[str, int]]:
+    """Per stream: samples in the bag, lost by the recorder's count (custom_data), and lost
+    by the stamps read back with the ``mcap`` reader (not the recorder's code path)."""
+    from mcap.reader import make_reader
+
+    from catheter_models.bag_metadata import bag_custom_data, locate_bag
+    from catheter_models.contract import RUN_STREAMS
+    from catheter_models.gaps import StreamGaps, header_stamp_ns
+
+    layout = locate_bag(bag)
+    said = json.loads(bag_custom_data(layout).get("samples_lost", "{}"))
+    pausing = {s.name for s in RUN_STREAMS}
+    found: dict[str, StreamGaps] = {}
+    for f in layout.mcap_files:
+        with f.open("rb") as stream:
+            for _schema, channel, message in make_reader(stream).iter_messages():
+                if channel.topic.endswith("trajectory"):
+                    continue
+                name = channel.topic.removeprefix("/catheter/")
+                gaps = found.setdefault(channel.topic, StreamGaps(pauses=name in pausing))
+                stamp_ns = header_stamp_ns(message.data)
+                if stamp_ns is not None:
+                    gaps.add(stamp_ns)
+    return {
+        topic: {"samples": g.samples, "lost_said": int(said.get(topic, -1)), "lost": g.lost}
+        for topic, g in sorted(found.items())
+    }
 
 
 def _fmt(value: float | None, digits: int = 3) -> str:
@@ -142,10 +188,16 @@ def main(argv: list[str] | None = None) -> int:
     rows: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory(prefix="bench_graph_") as tmp:
         csv = trajectory_csv(Path(tmp) / "trajectory.csv", duration_s)
-        for i, (label, rate_hz, rt_priority, extra_env) in enumerate(RUNS):
+        for i, (label, rate_hz, rt_priority, extra_env, hogs) in enumerate(RUNS):
             print(f"--- {label}, {duration_s:g} s of trajectory ---", flush=True)
             report = run_once(
-                rate_hz, rt_priority, csv, Path(tmp) / f"run_{i}", 90 + i, extra_env=extra_env
+                rate_hz,
+                rt_priority,
+                csv,
+                Path(tmp) / f"run_{i}",
+                90 + i,
+                extra_env=extra_env,
+                hogs=hogs,
             )
             timing = report["timing"]
             rows.append(
@@ -158,6 +210,13 @@ def main(argv: list[str] | None = None) -> int:
                         timing["missed_fraction"] is not None
                         and timing["missed_fraction"] <= MISSED_TARGET
                     ),
+                    "hogs": hogs,
+                    "bag": report["bag_lost"],
+                    "sensor_samples_lost": sum(
+                        v["lost"]
+                        for t, v in report["bag_lost"].items()
+                        if not t.endswith(("command", "desired"))
+                    ),
                     "rmse_deg": report["overall"]["rmse_deg"],
                     "mae_deg": report["overall"]["mae_deg"],
                     "wall_s": report["wall_s"],
@@ -166,7 +225,8 @@ def main(argv: list[str] | None = None) -> int:
 
     header = (
         f"{'run':<32} {'ticks':>7} {'missed':>7} {'missed %':>9} {'late p99':>9} "
-        f"{'comp p99':>9} {'lat p50':>8} {'lat p99':>8} {'lat max':>8} {'RMSE':>7}"
+        f"{'comp p99':>9} {'lat p50':>8} {'lat p99':>8} {'lat max':>8} {'RMSE':>7} "
+        f"{'sensor lost':>11}"
     )
     print("\nWhole simulated graph over DDS (ms; RMSE in deg)")
     print(header)
@@ -177,7 +237,8 @@ def main(argv: list[str] | None = None) -> int:
             f"{_fmt(None if frac is None else 100 * frac):>9} "
             f"{_fmt(r['lateness_p99_ms']):>9} {_fmt(r['compute_p99_ms']):>9} "
             f"{_fmt(r['command_latency_p50_ms']):>8} {_fmt(r['command_latency_p99_ms']):>8} "
-            f"{_fmt(r['command_latency_max_ms']):>8} {_fmt(r['rmse_deg']):>7}"
+            f"{_fmt(r['command_latency_max_ms']):>8} {_fmt(r['rmse_deg']):>7} "
+            f"{r['sensor_samples_lost']:>11}"
         )
     met = all(r["missed_target_met"] for r in rows if not r["baseline"])
     print(

@@ -805,10 +805,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--domain-id", type=int, default=93, help="ROS_DOMAIN_ID of the graph")
     parser.add_argument("--out", type=Path, help="JSON path (default bench/results/soak.json)")
     parser.add_argument("--keep-run", type=Path, help="keep the run (bag, logs) in this new dir")
+    parser.add_argument(
+        "--hogs",
+        type=int,
+        default=0,
+        help="busy-loop processes beside the graph (2: a lab PC doing other work); results "
+        "then go to soak_loaded.json",
+    )
     args = parser.parse_args(argv)
     duration_s = QUICK_DURATION_S if args.quick else args.duration_s
     warmup_s = QUICK_WARMUP_FRACTION * duration_s if args.quick else min(WARMUP_S, duration_s / 5)
-    out_json = args.out or RESULTS / ("soak.quick.json" if args.quick else "soak.json")
+    stem = "soak_loaded" if args.hogs else "soak"
+    out_json = args.out or RESULTS / (f"{stem}.quick.json" if args.quick else f"{stem}.json")
     namespace = "/catheter"
 
     with tempfile.TemporaryDirectory(prefix="bench_soak_") as tmp:
@@ -837,9 +845,17 @@ def main(argv: list[str] | None = None) -> int:
         }
         log = Path(tmp) / "follow_trajectory.log"
         print(f"--- soak: {duration_s:g} s at {CONTROL_RATE_HZ:g} Hz, recorder on ---", flush=True)
-        start = time.monotonic()
-        code, following, samples = run_soak(cmd, env, log, duration_s, duration_s + 240.0)
-        wall_s = time.monotonic() - start
+        busy = [
+            subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.hogs)
+        ]
+        try:
+            start = time.monotonic()
+            code, following, samples = run_soak(cmd, env, log, duration_s, duration_s + 240.0)
+            wall_s = time.monotonic() - start
+        finally:
+            for hog in busy:
+                hog.kill()
+                hog.wait()
         output = log.read_text(errors="replace")
         print(output)
         report_path = run_dir / "report.json"
@@ -873,6 +889,7 @@ def main(argv: list[str] | None = None) -> int:
         "follow_trajectory": " ".join(["follow_trajectory", *cmd[3:]]),
         "trajectory": "traj_arbitrary_small_variations then traj_descending_sine, repeated",
         "quick": args.quick,
+        "cpu_hogs": args.hogs,
         "wall_s": wall_s,
         **result,
         "machine": _machine()
