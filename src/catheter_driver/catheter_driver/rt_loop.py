@@ -63,7 +63,7 @@ def set_realtime(priority: int, tid: int = 0) -> str:
     return ""
 
 
-def set_process_realtime(priority: int) -> str:
+def set_process_realtime(priority: int, background_offset: int = _BACKGROUND_OFFSET) -> str:
     """Every current thread of this process (executor, DDS) to SCHED_FIFO below the loop.
 
     Python threads share one GIL: a loop thread that preempts everything still waits for the
@@ -71,8 +71,9 @@ def set_process_realtime(priority: int) -> str:
     other threads (below its loop) keeps that wait to the GIL hand-over interval. Measured on
     the whole simulated graph at 1 kHz: 18 % of deadlines missed at normal priority, 0.95 %
     with only the loop real time, under 0.1 % with the process too (docs/benchmarks.md).
+    ``background_offset`` 0 puts every thread at ``priority`` (a process with no loop).
     """
-    background = max(1, priority - _BACKGROUND_OFFSET)
+    background = max(1, priority - background_offset)
     tasks = Path("/proc/self/task")
     for tid in sorted(int(p.name) for p in tasks.iterdir()) if tasks.is_dir() else []:
         if not Path(tasks, str(tid)).exists():
