@@ -511,6 +511,8 @@ def _losses(data: _Collected, bag_path: Path | None) -> dict[str, Any]:
             said.append(
                 "follow_trajectory: the bag lacks samples: "
                 + ", ".join(f"{n} of {t}" for t, n in bag.items() if n)
+                + " (in the command streams these include ticks the compensator skipped, "
+                "commands that never existed)"
             )
     scored: dict[str, int] = {}
     for name, series, pauses in (
