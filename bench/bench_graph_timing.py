@@ -147,20 +147,19 @@ def bag_losses(bag: Path) -> dict[str, dict[str, int]]:
     from mcap.reader import make_reader
 
     from catheter_models.bag_metadata import bag_custom_data, locate_bag
-    from catheter_models.contract import RUN_STREAMS
-    from catheter_models.gaps import StreamGaps, header_stamp_ns
+    from catheter_models.gaps import StreamGaps, header_stamp_ns, pauses_between_runs
 
     layout = locate_bag(bag)
     said = json.loads(bag_custom_data(layout).get("samples_lost", "{}"))
-    pausing = {s.name for s in RUN_STREAMS}
     found: dict[str, StreamGaps] = {}
     for f in layout.mcap_files:
         with f.open("rb") as stream:
             for _schema, channel, message in make_reader(stream).iter_messages():
                 if channel.topic.endswith("trajectory"):
                     continue
-                name = channel.topic.removeprefix("/catheter/")
-                gaps = found.setdefault(channel.topic, StreamGaps(pauses=name in pausing))
+                gaps = found.setdefault(
+                    channel.topic, StreamGaps(pauses=pauses_between_runs(channel.topic))
+                )
                 stamp_ns = header_stamp_ns(message.data)
                 if stamp_ns is not None:
                     gaps.add(stamp_ns)

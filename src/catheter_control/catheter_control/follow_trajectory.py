@@ -37,7 +37,7 @@ from catheter_control.trajectory import (
 from catheter_driver.laser_core import Calibration
 from catheter_models.contract import ANGLE_DESIRED, DEFAULT_NAMESPACE, TIP_ANGLE
 from catheter_models.errors import CatheterError
-from catheter_models.gaps import describe_gaps, find_gaps
+from catheter_models.gaps import find_gaps, say_gaps
 from catheter_models.signals import TEST_TRAJECTORIES, get_preset
 
 _PLANT_STRAIGHT_DISTANCE_M = 0.065
@@ -520,9 +520,9 @@ def _losses(data: _Collected, bag_path: Path | None) -> dict[str, Any]:
         (TIP_ANGLE.name, data.measured, False),
     ):
         t_s = np.frombuffer(series.t_s, dtype=float)
-        _period, found = find_gaps(t_s, pauses=pauses)
+        period_s, found = find_gaps(t_s, pauses=pauses)
         scored[name] = sum(m for _, _, m in found)
-        line = describe_gaps(name, t_s, pauses=pauses, origin_s=float(t_s[0]) if t_s.size else 0.0)
+        line = say_gaps(name, period_s, found, origin_s=float(t_s[0]) if t_s.size else 0.0)
         if line is not None:
             said.append(f"follow_trajectory: scored without them: {line}")
     return {"bag": bag, "scored": scored, "said": said}

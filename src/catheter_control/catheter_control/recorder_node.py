@@ -34,9 +34,9 @@ from catheter_driver.params import declare_plain
 from catheter_driver.rt_loop import set_process_realtime
 from catheter_models import __version__
 from catheter_models.bag import LATCHED_QOS, STREAM_QOS, BagRecorder
-from catheter_models.contract import RECORDED_TOPICS, RUN_STREAMS, TRAJECTORY, TopicSpec
+from catheter_models.contract import RECORDED_TOPICS, TRAJECTORY, TopicSpec
 from catheter_models.errors import ParameterError
-from catheter_models.gaps import StreamGaps, header_stamp_ns
+from catheter_models.gaps import StreamGaps, header_stamp_ns, pauses_between_runs
 
 RECORDER_RT_PRIORITY = 0
 """Normal scheduling by default. 10 (below the loops at 50 and their nodes' other threads at
@@ -122,7 +122,7 @@ class RecorderNode(Node):
         self.counts[topic] = 0
         self._specs[topic] = spec
         if not latched:
-            self.gaps[topic] = StreamGaps(pauses=spec in RUN_STREAMS)
+            self.gaps[topic] = StreamGaps(pauses=pauses_between_runs(spec.name))
         self._subscribe(topic, qos.TRAJECTORY if latched else qos.RECORD)
 
     def _subscribe(self, topic: str, profile: QoSProfile) -> None:

@@ -20,9 +20,8 @@ from rosbags.rosbag2 import ReaderError as Rosbag2ReaderError
 from catheter_models.bag_messages import kilted_typestore
 from catheter_models.bag_metadata import bag_custom_data, locate_bag
 from catheter_models.bag_scan import REPAIR_COMMAND, MessageSink, has_footer, scan_mcap
-from catheter_models.contract import RUN_STREAMS
 from catheter_models.errors import BagError
-from catheter_models.gaps import StreamGaps, header_stamp_ns
+from catheter_models.gaps import StreamGaps, header_stamp_ns, pauses_between_runs
 from catheter_models.units import NS_PER_S
 
 _STAMPED_STREAMS = {
@@ -103,8 +102,7 @@ def bag_info(path: Path | str) -> str:
 def _new_stats(topic: str, msgtype: str) -> _TopicStats:
     if msgtype not in _STAMPED_STREAMS:
         return _TopicStats(msgtype)
-    pauses = any(topic.endswith("/" + s.name) or topic == s.name for s in RUN_STREAMS)
-    return _TopicStats(msgtype, gaps=StreamGaps(pauses=pauses))
+    return _TopicStats(msgtype, gaps=StreamGaps(pauses=pauses_between_runs(topic)))
 
 
 def _counter(stats: dict[str, _TopicStats]) -> MessageSink:

@@ -37,14 +37,13 @@ from catheter_models.contract import (
     PRESSURE_COMMAND,
     PRESSURE_MEASURED,
     REQUIRED_BAG_TOPICS,
-    RUN_STREAMS,
     TIP_ANGLE,
     TIP_DISTANCE,
     TopicSpec,
     qualify,
 )
 from catheter_models.errors import BagError, MissingTopicError, ParameterError
-from catheter_models.gaps import describe_gaps
+from catheter_models.gaps import describe_gaps, pauses_between_runs
 from catheter_models.units import AMBIENT_PRESSURE_PA, NS_PER_S
 
 FloatArray = npt.NDArray[np.float64]
@@ -176,10 +175,9 @@ class BagData:
         Command streams stop between runs; only silences shorter than ``gaps.PAUSE_S`` in them
         count (see :mod:`catheter_models.gaps`).
         """
-        pausing = {s.name for s in RUN_STREAMS}
         lines = []
         for name, series in self.series.items():
-            line = describe_gaps(name, series.t_s, pauses=name in pausing)
+            line = describe_gaps(name, series.t_s, pauses=pauses_between_runs(name))
             if line is not None:
                 lines.append(line)
         return lines

@@ -406,6 +406,16 @@ def _cmd_history(args: argparse.Namespace) -> int:
     return 0
 
 
+def _refit_arguments(p: argparse.ArgumentParser) -> None:
+    """What ``add`` and ``core`` share: the model changed, where it goes, the data, the lab."""
+    p.add_argument("model", type=Path, help="grey-box or DRDPI model directory")
+    p.add_argument("-o", "--output", type=Path, required=True, help="new model directory")
+    p.add_argument("--train", nargs="+", type=Path, required=True, help="training bags")
+    p.add_argument("--test", nargs="+", type=Path, help="held-out bags scored in the history")
+    p.add_argument("--lab", type=Path, default=Path("lab"), help="the lab's directory (lab)")
+    p.add_argument("--no-progress", action="store_true")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser (separate so docs and tests can inspect it)."""
     parser = argparse.ArgumentParser(prog="catheter-lab", description=__doc__.splitlines()[0])
@@ -547,12 +557,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     core = sub.add_parser("core", help="change a grey-box model's hysteresis core and refit")
     core.add_argument("name", help="the new core (drdpi, free_pi, boucwen)")
-    core.add_argument("model", type=Path, help="grey-box or DRDPI model directory")
-    core.add_argument("-o", "--output", type=Path, required=True, help="new model directory")
-    core.add_argument("--train", nargs="+", type=Path, required=True, help="training bags")
-    core.add_argument("--test", nargs="+", type=Path, help="held-out bags scored in the history")
-    core.add_argument("--lab", type=Path, default=Path("lab"), help="the lab's directory (lab)")
-    core.add_argument("--no-progress", action="store_true")
+    _refit_arguments(core)
     core.set_defaults(func=_cmd_core)
 
     expl = sub.add_parser(
@@ -569,12 +574,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     add = sub.add_parser("add", help="add an effect block to a grey-box model and refit")
     add.add_argument("effect", help="catalogue effect, e.g. pneumatic_lag (catheter-lab effects)")
-    add.add_argument("model", type=Path, help="grey-box or DRDPI model directory")
-    add.add_argument("-o", "--output", type=Path, required=True, help="new model directory")
-    add.add_argument("--train", nargs="+", type=Path, required=True, help="training bags")
-    add.add_argument("--test", nargs="+", type=Path, help="held-out bags scored in the history")
-    add.add_argument("--lab", type=Path, default=Path("lab"), help="the lab's directory (lab)")
-    add.add_argument("--no-progress", action="store_true")
+    _refit_arguments(add)
     add.set_defaults(func=_cmd_add)
 
     hist = sub.add_parser("history", help="model versions and their errors, with a plot")

@@ -21,6 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from catheter_models.contract import RUN_STREAMS
+
 GAP_FACTOR = 1.5
 """An interval longer than this many periods holds at least one lost sample."""
 
@@ -71,6 +73,11 @@ class Gap:
     def duration_s(self) -> float:
         """The silence [s] (missing samples times the period, plus one period)."""
         return (self.before_ns - self.after_ns) * 1e-9
+
+
+def pauses_between_runs(topic: str) -> bool:
+    """Whether ``topic`` (full or namespace-relative) stops between runs (a RUN_STREAM)."""
+    return any(topic == s.name or topic.endswith("/" + s.name) for s in RUN_STREAMS)
 
 
 def missing_samples(interval_s: float, period_s: float, *, pause_s: float | None) -> int:
@@ -208,6 +215,13 @@ def describe_gaps(
         origin_s: subtracted from the times shown [s].
     """
     period_s, found = find_gaps(t_s, pauses=pauses)
+    return say_gaps(name, period_s, found, origin_s=origin_s)
+
+
+def say_gaps(
+    name: str, period_s: float, found: list[tuple[float, float, int]], *, origin_s: float = 0.0
+) -> str | None:
+    """:func:`describe_gaps` for what :func:`find_gaps` already returned."""
     if not found:
         return None
     lost = sum(m for _, _, m in found)

@@ -577,7 +577,43 @@ def _recordings(xs: Sequence[FloatArray], ys: Sequence[FloatArray], rate_hz: flo
     ]
 
 
-class DRDPICore(Core):
+class _ThesisCore(Core):
+    """A core whose parameters are a thesis model's parameter table (DRDPI, GPI).
+
+    The table's own ``to_dict``/``from_dict`` are what the model file holds.
+    """
+
+    params: Any = None
+
+    @abstractmethod
+    def _params_type(self) -> Any:
+        """The parameter table's class (imported lazily, as the models are)."""
+
+    @property
+    def fitted(self) -> bool:
+        """Whether parameters are set."""
+        return self.params is not None
+
+    def set_params(self, params: Any) -> None:
+        """Adopt a parameter table (e.g. a fitted thesis model's)."""
+        self.params = params
+
+    def values(self) -> dict[str, Any]:
+        """The table's parameters by name."""
+        if self.params is None:
+            raise ModelError(f"{self.name} core is not fitted")
+        out: dict[str, Any] = self.params.to_dict()
+        return out
+
+    def load_values(self, values: Mapping[str, Any]) -> None:
+        """The table's parameters from a model file."""
+        try:
+            self.set_params(self._params_type().from_dict(dict(values)))
+        except (KeyError, TypeError, ValueError, ParameterError) as exc:
+            raise ModelError(f"{self.name} core values are malformed: {exc}") from None
+
+
+class DRDPICore(_ThesisCore):
     """The thesis's DRDPI (``models.drdpi``) as a core: its global search, its 12 parameters.
 
     Args:
@@ -612,6 +648,11 @@ class DRDPICore(Core):
         self.params: Any = None  # DRDPIParams once fitted
         self._coef: dict[float, FloatArray] = {}
 
+    def _params_type(self) -> Any:
+        from catheter_models.models.drdpi import DRDPIParams
+
+        return DRDPIParams
+
     def settings(self) -> dict[str, Any]:
         """Structure and search effort."""
         return {
@@ -622,13 +663,8 @@ class DRDPICore(Core):
             "seed": self.seed,
         }
 
-    @property
-    def fitted(self) -> bool:
-        """Whether parameters are set."""
-        return self.params is not None
-
     def set_params(self, params: Any) -> None:
-        """Adopt DRDPI parameters (e.g. a fitted DRDPI's)."""
+        """Adopt DRDPI parameters (e.g. a fitted DRDPI's); the cached coefficients go."""
         self.params = params
         self._coef = {}
 
@@ -720,29 +756,13 @@ class DRDPICore(Core):
 
         self.set_params(DRDPIParams.from_array(self._theta(v)))
 
-    def values(self) -> dict[str, Any]:
-        """Table 5.1's parameters."""
-        if self.params is None:
-            raise ModelError("drdpi core is not fitted")
-        out: dict[str, Any] = self.params.to_dict()
-        return out
-
-    def load_values(self, values: Mapping[str, Any]) -> None:
-        """Table 5.1's parameters from a model file."""
-        from catheter_models.models.drdpi import DRDPIParams
-
-        try:
-            self.set_params(DRDPIParams.from_dict(dict(values)))
-        except (KeyError, TypeError, ValueError, ParameterError) as exc:
-            raise ModelError(f"drdpi core values are malformed: {exc}") from None
-
 
 # ------------------------------------------------------------------------------------------
 # gpi: the thesis's Generalized Prandtl-Ishlinskii (ch. 9), rate-independent
 # ------------------------------------------------------------------------------------------
 
 
-class GPICore(Core):
+class GPICore(_ThesisCore):
     """The thesis's GPI (``models.gpi``): a tanh envelope, exponentially weighted plays.
 
     Rate-independent: the thesis fits one per frequency; as a core it is fitted on all the
@@ -756,14 +776,14 @@ class GPICore(Core):
         self.n_play, self.seed = int(n_play), int(seed)
         self.params: Any = None
 
+    def _params_type(self) -> Any:
+        from catheter_models.models.gpi import GPIParams
+
+        return GPIParams
+
     def settings(self) -> dict[str, Any]:
         """Structure and seed of the search."""
         return {"n_play": self.n_play, "seed": self.seed}
-
-    @property
-    def fitted(self) -> bool:
-        """Whether parameters are set."""
-        return self.params is not None
 
     def _coef(self, params: Any) -> FloatArray:
         from catheter_models.models.gpi import gpi_coefficients
@@ -837,22 +857,6 @@ class GPICore(Core):
         from catheter_models.models.gpi import GPIParams
 
         self.params = GPIParams.from_array(v)
-
-    def values(self) -> dict[str, Any]:
-        """Table 9.1's parameters by name."""
-        if self.params is None:
-            raise ModelError("gpi core is not fitted")
-        out: dict[str, Any] = self.params.to_dict()
-        return out
-
-    def load_values(self, values: Mapping[str, Any]) -> None:
-        """Table 9.1's parameters from a model file."""
-        from catheter_models.models.gpi import GPIParams
-
-        try:
-            self.params = GPIParams.from_dict(dict(values))
-        except (KeyError, TypeError, ValueError, ParameterError) as exc:
-            raise ModelError(f"gpi core values are malformed: {exc}") from None
 
 
 CORES: Final[Mapping[str, type[Core]]] = {c.name: c for c in (DRDPICore, FreePI, BoucWen, GPICore)}
