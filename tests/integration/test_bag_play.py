@@ -58,6 +58,7 @@ def test_a_played_bag_records_again_message_for_message(children: Children, tmp_
             "2",
             "--wait-for-subscribers-s",
             "30",
+            "--allow-commands",  # a domain of its own: no valve driver listens
             "--no-progress",
         ],
         timeout_s=120.0,
@@ -104,3 +105,12 @@ def test_bag_play_refuses_what_it_cannot_play(children: Children, tmp_path: Path
         timeout_s=60.0,
     )
     assert run.returncode == 2 and "--rate must be a positive factor" in run.stderr, run.stderr
+    # The commands in a bag would move a real catheter: not under their own names by default.
+    run = children.run(
+        "bag_play",
+        [sys.executable, "-m", "catheter_control.bag_play", str(bags), "--no-progress"],
+        timeout_s=60.0,
+    )
+    assert run.returncode == 2, run.stderr
+    assert "a valve driver on this ROS domain would move the catheter" in run.stderr, run.stderr
+    assert "--remap /catheter/pressure/command:=/replay/catheter/pressure/command" in run.stderr

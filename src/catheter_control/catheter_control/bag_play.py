@@ -13,8 +13,13 @@ recorder matches and gets every message. ``--wait-for-subscribers-s`` holds the 
 every topic has a subscriber (discovery takes seconds, and a recorder that has not matched yet
 would miss the start). Ctrl-C stops cleanly after the message in flight and says how far it got.
 
+A bag holds ``pressure/command`` and ``trajectory``; played under those names on the rig's
+ROS domain, the valve driver or the compensator would act on them. So they are refused unless
+remapped, left out with ``--topics``, or allowed with ``--allow-commands`` (on an isolated
+domain). The drivers' own limits and watchdog still hold for whatever arrives.
+
 Exit codes: 0 played to the end (or stopped by Ctrl-C), 2 refused (unreadable bag, no such
-topic, bad option).
+topic, commands not remapped, bad option).
 """
 
 from __future__ import annotations
@@ -29,6 +34,7 @@ from typing import Any
 from tqdm import tqdm
 
 from catheter_models.bag_playback import Player
+from catheter_models.contract import PRESSURE_COMMAND, TRAJECTORY
 from catheter_models.errors import CatheterError, ParameterError
 
 EXIT_REFUSED = 2
@@ -64,6 +70,12 @@ def _parse(argv: Sequence[str]) -> argparse.Namespace:
         default=0.0,
         help="wait up to this long until every topic has a subscriber before starting [s]",
     )
+    p.add_argument(
+        "--allow-commands",
+        action="store_true",
+        help="publish pressure/command and trajectory under their own names (a valve driver "
+        "on this domain would execute them); without it they must be remapped or left out",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = p.parse_args(argv)
     if not (args.rate > 0.0 and args.rate < float("inf")):
@@ -87,6 +99,11 @@ def _remaps(pairs: Sequence[str]) -> dict[str, str]:
     return out
 
 
+def moves_the_catheter(topic: str) -> bool:
+    """Whether a valve driver or the compensator acts on ``topic`` (full name)."""
+    return any(topic.endswith("/" + spec.name) for spec in (PRESSURE_COMMAND, TRAJECTORY))
+
+
 def _profile(qos: dict[str, Any]) -> Any:
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
@@ -106,15 +123,26 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code."""
     import rclpy
     from rclpy.signals import SignalHandlerOptions
-    from rclpy.utilities import remove_ros_args
 
     from catheter_driver.messages import message_class
     from catheter_driver.node_main import install_stop_handlers
 
     argv = sys.argv if argv is None else ["bag_play", *argv]
     try:
-        args = _parse(remove_ros_args(argv)[1:])
+        # Ours are what comes before --ros-args (rcl would take a bare FROM:=TO as its own).
+        ours = argv[1 : argv.index("--ros-args")] if "--ros-args" in argv else argv[1:]
+        args = _parse(ours)
         player = Player(args.bag, args.topics, _remaps(args.remap))
+        moving = [
+            t.out for t in player.topics.values() if t.out == t.name and moves_the_catheter(t.name)
+        ]
+        if moving and not args.allow_commands:
+            raise ParameterError(
+                f"refused: the bag holds {', '.join(moving)}; played under the recorded name, "
+                "a valve driver on this ROS domain would move the catheter. Remap it away (--remap "
+                f"{moving[0]}:=/replay{moving[0]}), leave it out (--topics ...), or pass "
+                "--allow-commands on an isolated ROS_DOMAIN_ID"
+            )
     except (CatheterError, OSError) as exc:
         print(f"bag_play: {exc}", file=sys.stderr)
         return EXIT_REFUSED
