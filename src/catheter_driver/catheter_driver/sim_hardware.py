@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import threading
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 from catheter_driver.command_order import CommandOrder
@@ -59,6 +60,7 @@ class SimHardware:
         self._clamped = 0
         self._vents = 0
         self._order = CommandOrder()
+        self._ticks_done = 0
         self.last_refusal: str = ""
 
     def command(self, gauge_pa: float, now_s: float, stamp_ns: int | None = None) -> bool:
@@ -104,6 +106,29 @@ class SimHardware:
                 self._order.forget()
             command = 0.0 if self._venting else self._command_pa
         return self.plant.step(command)
+
+    def step_through(
+        self, k: int, deadline_s: float, period_s: float
+    ) -> Iterator[tuple[float, PlantSample]]:
+        """Every sample up to tick ``k`` not taken yet: (its instant [monotonic s], sample).
+
+        The rig samples whether or not the host ran on time: after an overrun, the caller
+        gets the backlog, each sample at its true instant, as a sensor driver drains its
+        buffer (``sim_hardware`` publishes them; the emulated rig's devices stream them).
+        """
+        while self._ticks_done < k:
+            self._ticks_done += 1
+            sample_time_s = deadline_s - (k - self._ticks_done) * period_s
+            yield sample_time_s, self.step(sample_time_s)
+
+    @property
+    def ticks_done(self) -> int:
+        """Samples taken through :meth:`step_through` since the last :meth:`reset_ticks`."""
+        return self._ticks_done
+
+    def reset_ticks(self) -> None:
+        """A new loop starts counting its ticks from 1."""
+        self._ticks_done = 0
 
     @property
     def venting(self) -> bool:

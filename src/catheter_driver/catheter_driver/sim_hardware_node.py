@@ -72,7 +72,6 @@ class SimHardwareNode(LoopNode):
         )
         self.hw.plant.warm_up()
         self._latency = LatencyWindow()
-        self._samples_done = 0
         self.create_loop(rig["sample_rate_hz"], self._tick)
         self.create_timer(1.0, self._publish_diagnostics)
         on = [n for n in EFFECTS if config.enabled(n)]
@@ -92,11 +91,7 @@ class SimHardwareNode(LoopNode):
         # through every missed sample and publish the backlog with its true stamps, as a
         # sensor driver drains its buffer. Stamps are the sampling instants (monotonic
         # deadlines mapped to ROS time), so bags align across nodes.
-        period_s = self.loop.period_s
-        while self._samples_done < k:
-            self._samples_done += 1
-            sample_time_s = deadline_s - (k - self._samples_done) * period_s
-            sample = self.hw.step(sample_time_s)
+        for sample_time_s, sample in self.hw.step_through(k, deadline_s, self.loop.period_s):
             stamp_ns = self.stamp_ns(sample_time_s)
             self._pub_pressure.publish(
                 messages.fluid_pressure(sample.pressure_measured_pa, stamp_ns, "", self.ambient_pa)

@@ -99,7 +99,6 @@ class EmulatedRig:
         self._emulators: list[Emulator] = []
         self._latest: PlantSample | None = None
         self._loop: DeadlineLoop | None = None
-        self._steps_done = 0
         self._lock = threading.Lock()
         self._last_command_s: float | None = None
         self._vented_at_s: float | None = None
@@ -127,7 +126,7 @@ class EmulatedRig:
     def start(self) -> None:
         """Compile the plant, start stepping it, then start the attached emulators."""
         self.hw.plant.warm_up()
-        self._steps_done = 0
+        self.hw.reset_ticks()
         self._loop = DeadlineLoop(
             self.sample_rate_hz, self._tick, name="emulated-rig", rt_priority=self.rt_priority
         )
@@ -172,11 +171,7 @@ class EmulatedRig:
         # an overrun, step through every missed sample, so the laser bridge streams the backlog
         # with consecutive counters as a bridge with a FIFO does, rather than a plant that
         # skips time the sensors never saw.
-        period_s = 1.0 / self.sample_rate_hz
-        while self._steps_done < k:
-            self._steps_done += 1
-            sample_time_s = deadline_s - (k - self._steps_done) * period_s
-            sample = self.hw.step(sample_time_s)
+        for sample_time_s, sample in self.hw.step_through(k, deadline_s, 1.0 / self.sample_rate_hz):
             with self._lock:
                 self._latest = sample
                 listeners = tuple(self._listeners)
@@ -213,7 +208,7 @@ class EmulatedRig:
         loop = self._loop
         stats = loop.stats() if loop is not None else None
         return {
-            "plant_steps": self._steps_done,
+            "plant_steps": self.hw.ticks_done,
             "steps_caught_up": None if stats is None else stats.missed,
             "t_s": time.monotonic(),
             "command_pa": self.hw.command_pa,
