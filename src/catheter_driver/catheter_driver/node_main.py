@@ -71,8 +71,9 @@ def run_nodes(
 
     ``events_executor`` spins rclpy's EventsExecutor instead of the SingleThreadedExecutor, for
     nodes whose work is taking many messages: it costs about a quarter of the CPU per message
-    (measured: 380 against 94 us per message at 1,250 messages/s, 220 against 60-77 us at
-    5,000), which decides whether a recorder keeps up on a busy 2-core machine. It is
+    (319 against 65 us at 1,250 messages/s, 219 against 57 us at 5,000:
+    bench/bench_executor_intake.py), which decides whether a recorder keeps up on a busy
+    2-core machine. It is
     rclpy's experimental executor, so only the recorder uses it.
 
     The nodes are built inside one rclpy context, in order; a :class:`CatheterError` while
