@@ -413,13 +413,22 @@ class Driver:
         )
         assert ready, children.all_logs()
 
-    def send(self, duration_s: float, make: Callable[[int], list[tuple[float, int]]]) -> None:
-        """Every 4 ms for ``duration_s``: publish ``make(now_ns)``'s (gauge Pa, stamp ns)."""
+    def send(
+        self,
+        duration_s: float,
+        make: Callable[[int], list[tuple[float, int]]],
+        until: Callable[[], bool] = lambda: False,
+    ) -> int:
+        """Every 4 ms for ``duration_s`` (or until ``until()``): publish ``make(now_ns)``'s
+        (gauge Pa, stamp ns). Returns how many rounds were sent (fewer on a busy machine)."""
         end = time.monotonic() + duration_s
-        while time.monotonic() < end:
+        rounds = 0
+        while time.monotonic() < end and not until():
             for value_pa, stamp_ns in make(self.clock.now().nanoseconds):
                 self.pub.publish(messages.fluid_pressure(value_pa, stamp_ns, ""))
+            rounds += 1
             self.probe.spin_for(SAMPLE_S)
+        return rounds
 
     def values(self, since: int = 0) -> dict[str, str]:
         found = statuses(self.diags[since:], SIM)
@@ -444,26 +453,34 @@ def driver(children: Children) -> Any:
     safe="older commands refused; the line holds the newer intent",
 )
 def test_reordered_commands_are_refused(driver: Driver, fault: FaultRecord) -> None:
-    driver.send(1.5, lambda now: [(1.0e5, now)])
+    def newer(now: int) -> list[tuple[float, int]]:
+        return [(1.0e5, now)]
+
+    driver.send(1.5, newer)
     n_diag, t_fault = len(driver.diags), time.monotonic()
     # The newer stamp says 1 bar; the older, arriving after it, says 2.5 bar.
-    driver.send(1.5, lambda now: [(1.0e5, now), (2.5e5, now - 2_000_000)])
+    pairs = driver.send(1.5, lambda now: [(1.0e5, now), (2.5e5, now - 2_000_000)])
+
+    def refused() -> int:
+        return int(driver.values(n_diag).get("commands_refused_out_of_order", "0"))
+
+    # Keep the newer intent coming until the driver's next report: with commands stopped its
+    # watchdog would vent (rightly) and its status would say that instead. The input is best
+    # effort, so a few of the pairs may never arrive; nine in ten must be counted.
+    driver.send(5.0, newer, until=lambda: refused() >= 0.9 * pairs)
     held = gauge_pa([m for m in driver.measured if m.mono_s > t_fault])
     fault.check(
         "the older intent never applied",
         held.size > 100 and held.max() < 1.0e5 + 5.0e3,
         f"line reached {held.max(initial=0) / 1e5:.3f} bar (newer intent 1 bar, older 2.5 bar)",
     )
-    values = driver.wait_values(
-        lambda v: int(v.get("commands_refused_out_of_order", "0")) > 200, n_diag
-    )
     status = statuses(driver.diags[n_diag:], SIM)[-1]
     fault.check(
         "reported",
-        int(values.get("commands_refused_out_of_order", "0")) > 200
+        0.9 * pairs <= refused() <= pairs
         and status.level == DiagnosticStatus.WARN
         and "out-of-order" in status.message,
-        f"{status.message!r}, {values.get('commands_refused_out_of_order')} refused",
+        f"{status.message!r}, {refused()} of {pairs} older commands refused",
     )
     fault.safe_after(0.0)  # never left the safe state: the first reordered command is refused
     _check_range(fault, [], driver.measured)
