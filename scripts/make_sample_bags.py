@@ -19,7 +19,12 @@ import time
 from pathlib import Path
 
 from catheter_control.bringup import NodeSpec, ProcessGraph, sim_graph_specs
+from catheter_models.bag import load_bag
+from catheter_models.contract import SENSOR_STREAMS
 from catheter_models.signals import TEST_PRESSURE_SIGNALS, get_preset, training_set
+
+ATTEMPTS = 3
+"""Recordings tried per bag before giving up: a shipped bag must not lack a sensor sample."""
 
 BAGS = {"training": "training"} | {name: name for name in TEST_PRESSURE_SIGNALS}
 
@@ -55,6 +60,14 @@ def record(signal: str, bag: Path, domain: int) -> None:
     shutil.rmtree(bag.parent / f".logs-{signal}", ignore_errors=True)
 
 
+def sensor_gaps(bag: Path) -> list[str]:
+    """The bag's gap lines for sensor streams (commands skipped by a late tick are allowed:
+    the valve held its set-point, and the bag says so)."""
+    sensors = {spec.name for spec in SENSOR_STREAMS}
+    data = load_bag(bag)
+    return [line for line in data.gap_report() if line.split()[0] in sensors]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("bags"))
@@ -66,9 +79,16 @@ def main() -> None:
         if name not in BAGS:
             sys.exit(f"unknown bag {name!r}; choose from {', '.join(BAGS)}")
         bag = args.out / BAGS[name]
-        if bag.exists():
-            shutil.rmtree(bag)
-        record(name, bag, args.domain)
+        for attempt in range(1, ATTEMPTS + 1):
+            if bag.exists():
+                shutil.rmtree(bag)
+            record(name, bag, args.domain)
+            gaps = sensor_gaps(bag)
+            if not gaps:
+                break
+            print(f"{name}: attempt {attempt} lacks sensor samples: {'; '.join(gaps)}", flush=True)
+        else:
+            raise SystemExit(f"{name}: every one of {ATTEMPTS} recordings lacked sensor samples")
 
 
 if __name__ == "__main__":
