@@ -220,6 +220,11 @@ def test_sensor_watch_names_the_stale_stream() -> None:
     watch.seen("pressure/measured", 1.1)
     assert watch.stale(1.15) == "tip/angle stale: no sample for 150 ms (limit 100 ms)"
     assert watch.age_s("pressure/measured", 1.15) == pytest.approx(0.05)
+    # The longest wait between samples since the last look, then forgotten.
+    watch.seen("tip/angle", 1.16)
+    assert watch.take_longest_silence_s("tip/angle") == pytest.approx(0.16)
+    assert watch.take_longest_silence_s("tip/angle") == 0.0
+    assert watch.take_longest_silence_s("pressure/measured") == pytest.approx(0.1)
     with pytest.raises(ValueError, match="timeout"):
         SensorWatch(("tip/angle",), 0.0)
 

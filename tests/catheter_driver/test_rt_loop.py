@@ -34,6 +34,9 @@ def test_overrun_skips_missed_deadlines() -> None:
     stats = loop.stats()
     assert stats.missed >= 9
     assert ks[3] - ks[2] >= 10, "the loop resumes at the next future deadline, no burst"
+    # The overrun left the loop at least 50 ms behind its schedule; the report says so once.
+    assert loop.take_worst_behind_s() >= 0.05
+    assert loop.take_worst_behind_s() == 0.0, "forgotten once taken (the loop has stopped)"
 
 
 @pytest.mark.filterwarnings("ignore::pytest.PytestUnhandledThreadExceptionWarning")

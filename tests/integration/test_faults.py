@@ -419,8 +419,10 @@ class Driver:
         make: Callable[[int], list[tuple[float, int]]],
         until: Callable[[], bool] = lambda: False,
     ) -> int:
-        """Every 4 ms for ``duration_s`` (or until ``until()``): publish ``make(now_ns)``'s
-        (gauge Pa, stamp ns). Returns how many rounds were sent (fewer on a busy machine)."""
+        """Publish ``make(now_ns)``'s (gauge Pa, stamp ns) every 4 ms; how many rounds went.
+
+        Sends for ``duration_s`` or until ``until()``; fewer rounds go on a busy machine.
+        """
         end = time.monotonic() + duration_s
         rounds = 0
         while time.monotonic() < end and not until():

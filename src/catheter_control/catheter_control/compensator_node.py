@@ -278,10 +278,17 @@ class CompensatorNode(LoopNode):
                 "missed_deadlines": stats.missed,
                 "lateness_p50_ms": f"{stats.lateness_p50_s * 1e3:.3f}",
                 "lateness_p99_ms": f"{stats.lateness_p99_s * 1e3:.3f}",
+                "behind_max_ms": f"{self.loop.take_worst_behind_s() * 1e3:.3f}",
                 "compute_p50_ms": f"{stats.compute_p50_s * 1e3:.3f}",
                 "compute_p99_ms": f"{stats.compute_p99_s * 1e3:.3f}",
                 **{
                     f"{name.replace('/', '_')}_age_ms": f"{self.watch.age_s(name, now_s) * 1e3:.0f}"
+                    for name in self.watch.required
+                },
+                **{
+                    f"{name.replace('/', '_')}_longest_silence_ms": (
+                        f"{self.watch.take_longest_silence_s(name) * 1e3:.0f}"
+                    )
                     for name in self.watch.required
                 },
             },

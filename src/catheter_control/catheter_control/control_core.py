@@ -238,11 +238,24 @@ class SensorWatch:
         self.required = required
         self.timeout_s = timeout_s
         self._last_s: dict[str, float | None] = dict.fromkeys(required)
+        self._longest_s: dict[str, float] = dict.fromkeys(required, 0.0)
 
     def seen(self, name: str, now_s: float) -> None:
         """A sample of ``name`` arrived at monotonic ``now_s``."""
         if name in self._last_s:
+            last = self._last_s[name]
+            if last is not None:
+                self._longest_s[name] = max(self._longest_s[name], now_s - last)
             self._last_s[name] = now_s
+
+    def take_longest_silence_s(self, name: str) -> float:
+        """The longest wait between two samples of ``name`` since the previous call [s].
+
+        The early warning: a stream that went quiet for 60 ms did not trip a 100 ms timeout,
+        but says how close it came (and when, against the producer's own reports).
+        """
+        longest, self._longest_s[name] = self._longest_s[name], 0.0
+        return longest
 
     def age_s(self, name: str, now_s: float) -> float:
         """Seconds since the last sample of ``name`` (inf if none yet)."""

@@ -463,7 +463,8 @@ def _run(
             # streams this run was scored on (from their stamps).
             "bag_samples_lost": losses["bag"],
             "scored_samples_lost": losses["scored"],
-            # The compensator's 1 Hz reports over the run: where in it deadlines were missed.
+            # The compensator's 1 Hz reports over the run: where in it deadlines were missed,
+            # how far behind its loop fell and how long each sensor it needs went quiet.
             "timing_series": [
                 {
                     "t_s": round(t - run_start_s, 3),
@@ -475,10 +476,22 @@ def _run(
                             "missed_deadlines",
                             "lateness_p99_ms",
                             "compute_p99_ms",
+                            "behind_max_ms",
+                            *(k for k in v if k.endswith("_longest_silence_ms")),
                         )
                     },
                 }
                 for t, v in data.compensator
+                if t >= first
+            ],
+            # The driver's (the sensors' producer) beside it: a sensor silence with the
+            # driver's loop on time was lost on the way, one with it behind was never sent.
+            "driver_timing_series": [
+                {
+                    "t_s": round(t - run_start_s, 3),
+                    **{k: v.get(k, "") for k in ("missed_deadlines", "behind_max_ms")},
+                }
+                for t, v in data.driver
                 if t >= first
             ],
         },

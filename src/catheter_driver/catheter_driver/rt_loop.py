@@ -118,6 +118,7 @@ class DeadlineLoop:
         self._compute: deque[float] = deque(maxlen=window)
         self._ticks = 0
         self._missed = 0
+        self._worst_behind_s = 0.0
         self.error: BaseException | None = None
         """An exception that ended the loop, kept for the owner to report."""
         self.rt_priority = rt_priority
@@ -154,6 +155,7 @@ class DeadlineLoop:
                 self._tick(k, deadline)
                 end = time.monotonic()
                 self._lateness.append(start - deadline)
+                self._worst_behind_s = max(self._worst_behind_s, end - deadline)
                 self._compute.append(end - start)
                 self._ticks += 1
                 # Skip deadlines already passed instead of bursting through them.
@@ -165,6 +167,17 @@ class DeadlineLoop:
         except BaseException as exc:  # the owner decides; we must not die silently
             self.error = exc
             raise
+
+    def take_worst_behind_s(self) -> float:
+        """How far behind its schedule the loop fell since the previous call [s].
+
+        The worst tick's end minus its deadline: a late wake-up and a long tick alike; then
+        forgotten. A percentile over thousands of ticks hides the one stall that matters; a
+        node reports this once a second, so a stall can be placed in time against other
+        nodes' reports.
+        """
+        worst, self._worst_behind_s = self._worst_behind_s, 0.0
+        return worst
 
     def stats(self) -> LoopStats:
         """Current statistics (percentiles over the recent window)."""

@@ -124,6 +124,7 @@ class SimHardwareNode(LoopNode):
             "samples": stats.ticks,
             "missed_deadlines": stats.missed,
             "lateness_p99_ms": f"{stats.lateness_p99_s * 1e3:.3f}",
+            "behind_max_ms": f"{self.loop.take_worst_behind_s() * 1e3:.3f}",
             **self._latency.summary_ms(),
         }
         values.update(self.config.describe())
