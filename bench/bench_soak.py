@@ -594,6 +594,73 @@ def _fmt(value: float | None, spec: str) -> str:
     return "n/a" if value is None else format(value, spec)
 
 
+STALL_MS = 50.0
+"""A sensor silence the compensator saw longer than this [ms] is a stall worth placing."""
+BEHIND_MS = 25.0
+"""A loop this far behind its schedule [ms] in the same second is where the stall came from."""
+
+
+def stall_table(
+    series: Sequence[Mapping[str, Any]], driver_series: Sequence[Mapping[str, Any]]
+) -> dict[str, Any]:
+    """Each second in which a sensor the compensator needs went quiet for over ``STALL_MS``,
+    beside how far behind the compensator's loop and the driver's (the producer's) fell then.
+
+    A silence with the driver behind is samples produced late (the producer stalled); with the
+    compensator behind, samples taken late (the consumer stalled); with neither, the delay was
+    on the way (DDS, the kernel) or in a part of a node no loop measures.
+    """
+
+    def ms(row: Mapping[str, Any], key: str) -> float:
+        try:
+            return float(row.get(key, "") or "nan")
+        except ValueError:
+            return math.nan
+
+    def driver_at(t_s: float) -> float:
+        # The driver reports on its own 1 Hz clock: the worst of its reports within 1 s.
+        near = [ms(r, "behind_max_ms") for r in driver_series if abs(r["t_s"] - t_s) <= 1.0]
+        near = [v for v in near if not math.isnan(v)]
+        return max(near) if near else math.nan
+
+    rows = []
+    for row in series:
+        silences = {
+            k.removesuffix("_longest_silence_ms"): ms(row, k)
+            for k in row
+            if k.endswith("_longest_silence_ms")
+        }
+        loud = {k: v for k, v in silences.items() if v > STALL_MS}
+        if not loud:
+            continue
+        comp, drv = ms(row, "behind_max_ms"), driver_at(row["t_s"])
+        cause = (
+            "driver behind"
+            if drv > BEHIND_MS
+            else "compensator behind"
+            if comp > BEHIND_MS
+            else "neither loop behind"
+        )
+        rows.append(
+            {
+                "t_s": row["t_s"],
+                "silence_ms": loud,
+                "compensator_behind_ms": comp,
+                "driver_behind_ms": drv,
+                "where": cause,
+            }
+        )
+    measured = any(k.endswith("_longest_silence_ms") for r in series for k in r)
+    return {
+        "measured": measured,
+        "stall_ms": STALL_MS,
+        "behind_ms": BEHIND_MS,
+        "seconds_with_a_stall": len(rows),
+        "by_where": {w: sum(r["where"] == w for r in rows) for w in {r["where"] for r in rows}},
+        "rows": rows,
+    }
+
+
 def analyse(
     report: Mapping[str, Any],
     samples: Sequence[tuple[float, dict[str, float]]],
@@ -702,6 +769,7 @@ def analyse(
             "topics": topics,
             "trajectory_messages": len(stamps.get(f"{namespace.rstrip('/')}/trajectory", ())),
         },
+        "stalls": stall_table(series, report.get("driver_timing_series", [])),
         "verdicts": verdicts,
         "_plot": {
             "t": t_rss,
@@ -784,6 +852,20 @@ def print_table(result: Mapping[str, Any]) -> None:
         "skipped: gaps the compensator's missed deadlines account for (it skips, not bursts); "
         "max gap in periods"
     )
+    stalls = result.get("stalls", {})
+    if stalls.get("measured"):
+        where = ", ".join(f"{w}: {n}" for w, n in sorted(stalls["by_where"].items()))
+        print(
+            f"\nStalls: {stalls['seconds_with_a_stall']} second(s) in which a sensor the "
+            f"compensator needs went quiet for over {stalls['stall_ms']:g} ms"
+            + (f" ({where})" if where else "")
+        )
+        for row in stalls["rows"][:10]:
+            quiet = ", ".join(f"{k} {v:.0f} ms" for k, v in row["silence_ms"].items())
+            print(
+                f"  t = {row['t_s']:7.1f} s  {quiet}; behind: compensator "
+                f"{row['compensator_behind_ms']:.0f} ms, driver {row['driver_behind_ms']:.0f} ms"
+            )
     print(
         "Verdicts: run "
         + ("completed" if v["run_completed"] else "STOPPED EARLY")

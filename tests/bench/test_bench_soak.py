@@ -313,3 +313,30 @@ def test_analyse_a_clean_run_and_one_that_stopped(
     assert result["bag"]["compensator_span_s"] == pytest.approx(9.299)
     soak.print_table(result)
     assert "STOPPED EARLY" in capsys.readouterr().out
+
+
+def test_stalls_are_placed_against_the_loop_that_fell_behind(soak: ModuleType):
+    series = [
+        {"t_s": 1.0, "behind_max_ms": "2", "tip_angle_longest_silence_ms": "8"},
+        {"t_s": 2.0, "behind_max_ms": "3", "tip_angle_longest_silence_ms": "104"},
+        {"t_s": 3.0, "behind_max_ms": "90", "pressure_measured_longest_silence_ms": "95"},
+        {"t_s": 4.0, "behind_max_ms": "1", "tip_angle_longest_silence_ms": "70"},
+        {"t_s": 5.0, "behind_max_ms": "1"},  # an older compensator: no silences reported
+    ]
+    # Reports on the driver's own 1 Hz clock; one covers the second before it, so the one at
+    # 1.9 s overlaps the compensator's report at 2 s (and the one at 1 s), not the one at 3 s.
+    driver = [
+        {"t_s": 0.9, "behind_max_ms": "1"},
+        {"t_s": 1.9, "behind_max_ms": "100"},
+        {"t_s": 3.9, "behind_max_ms": "1"},
+        {"t_s": 4.9, "behind_max_ms": "2"},
+    ]
+    stalls = soak.stall_table(series, driver)
+    assert stalls["measured"] and stalls["seconds_with_a_stall"] == 3
+    assert [r["where"] for r in stalls["rows"]] == [
+        "driver behind",
+        "compensator behind",
+        "neither loop behind",
+    ]
+    assert stalls["rows"][0]["silence_ms"] == {"tip_angle": 104.0}
+    assert not soak.stall_table(series[-1:], driver)["measured"]

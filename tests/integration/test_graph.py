@@ -458,3 +458,42 @@ def test_the_recorder_counts_and_says_what_it_could_not_keep(
     assert json.loads(data.custom_data["samples_lost"])[angle_topic] == 22
     assert json.loads(data.custom_data["gaps"])[angle_topic] == 1
     assert any("tip/angle lacks 22 samples in 1 gap(s)" in line for line in data.gap_report())
+
+
+def test_a_recorder_whose_writer_falls_behind_drops_counts_and_still_finishes_its_bag(
+    children: Children, tmp_path: Path
+) -> None:
+    """With room for one message between writer passes, a burst overflows the recorder's
+    intake: it drops and counts rather than growing without bound, every message it was sent
+    is either in the bag or counted, and the bag closes whole (mcap summary readable)."""
+    bag = tmp_path / "bag"
+    specs = sim_graph_specs(bag, {"source": "queue test"})[:1]
+    specs[0].params["max_queue"] = 1
+    graph = children.graph(specs)
+    angle_topic = qualify(TIP_ANGLE)
+    with Probe(children.domain_id) as probe:
+        probe.subscribe(DiagnosticArray, DIAGNOSTICS.name, 10)  # read by recorder_values
+        pub = probe.node.create_publisher(JointState, TIP_ANGLE.name, STREAM)
+        assert probe.spin_until(
+            lambda: recorder_values(probe).get(f"publishers {angle_topic}") == "1", 30.0
+        ), recorder_values(probe)
+        t0_ns = probe.node.get_clock().now().nanoseconds
+        sent = 400
+        for k in range(sent - 1):  # a burst, far faster than one message per writer pass
+            pub.publish(messages.joint_state(0.001 * k, t0_ns + k * PERIOD_NS))
+        probe.spin_for(1.0)  # the writer catches up; the last message then surely fits
+        pub.publish(messages.joint_state(0.0, t0_ns + (sent - 1) * PERIOD_NS))
+        said = probe.spin_until(
+            lambda: int(recorder_values(probe).get(f"dropped {angle_topic}", "0")) > 0, 10.0
+        )
+        assert said, recorder_values(probe)
+    assert graph.stop(timeout_s=15.0) == {"recorder": 0}
+    with (bag / "bag_0.mcap").open("rb") as f:
+        summary = make_reader(f).get_summary()  # a finished file: summary and footer
+    assert summary is not None
+    data = load_bag(bag, topics=[TIP_ANGLE.name])
+    written = data.tip_angle.t_s.size
+    dropped = json.loads(data.custom_data["dropped_by_recorder"])[angle_topic]
+    assert 0 < dropped and written + dropped == sent, (written, dropped)
+    # Every drop lies between written samples, so the stamps count each one as lost.
+    assert json.loads(data.custom_data["samples_lost"])[angle_topic] == dropped

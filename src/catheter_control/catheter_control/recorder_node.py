@@ -12,6 +12,12 @@ reliable publishers, and the node spins rclpy's EventsExecutor (a quarter of the
 message). Whatever is lost anyway (a best-effort publisher over a lossy link, a queue overrun)
 shows as a gap in the header stamps: counted per topic (``catheter_models.gaps``), reported
 on ``/diagnostics`` and written into the bag's ``custom_data`` (``samples_lost``, ``gaps``).
+
+The intake queue is bounded (``max_queue``): a writer that falls far behind (a busy machine,
+a slow disk) makes the recorder drop and count, not grow until the machine swaps. On a stop
+the writer goes on for ``close_timeout_s`` at most, so the bag is always finished with its
+summary before a launcher's SIGKILL; what it could not write is counted as lost
+(``dropped_by_recorder`` in ``custom_data``).
 """
 
 from __future__ import annotations
@@ -48,6 +54,20 @@ the default favours control. See docs/interfaces.md."""
 _DRAIN_S = 0.005
 """How often the writer thread looks for queued messages [s] (cheaper than a wake-up each)."""
 
+MAX_QUEUE = 100_000
+"""Messages the intake may hold for the writer: 20 s of the whole contract at 1 kHz (5,000
+messages/s, about 100 B each, so about 10 MB). Beyond it a message is dropped and counted,
+rather than the recorder growing until the machine swaps (measured at 1 kHz beside two busy
+loops: the writer, at normal priority, fell minutes behind)."""
+
+_MAX_DROPPED_STAMPS = 100_000
+"""Stamps of dropped samples kept for the gap count between writer passes (about 10 MB)."""
+
+CLOSE_TIMEOUT_S = 6.0
+"""How long a stopping recorder goes on writing its backlog [s], below the launcher's 10 s
+before SIGKILL: a bag cut off by a kill has no summary, a bag closed with a count of what it
+could not write is whole and says so."""
+
 
 class RecorderNode(Node):
     """Thin ROS shell over :class:`BagRecorder`, with a non-blocking intake and gap counts."""
@@ -82,12 +102,34 @@ class RecorderNode(Node):
         self._queue: deque[tuple[str, bytes, int]] = deque()
         self.queue_max = 0
         """The deepest the intake queue has been (messages waiting for the writer thread)."""
+        self.max_queue = int(
+            declare_plain(
+                self, "max_queue", MAX_QUEUE, "messages held for the writer before dropping"
+            )
+        )
+        self.close_timeout_s = float(
+            declare_plain(
+                self, "close_timeout_s", CLOSE_TIMEOUT_S, "write the backlog this long on stop [s]"
+            )
+        )
+        if self.max_queue < 1 or not self.close_timeout_s > 0.0:
+            raise ParameterError(
+                f"recorder: max_queue must be >= 1 and close_timeout_s > 0 "
+                f"(got {self.max_queue}, {self.close_timeout_s})"
+            )
+        self.dropped: dict[str, int] = {}
+        """Per topic: messages received but not written: dropped at intake (queue full) or
+        left unwritten at shutdown. Their stamps still reach the gap count, so a sample is
+        counted lost once: as a gap if it never arrived, as dropped if it did."""
+        self._dropped_stamps: deque[tuple[str, int | None]] = deque()
+        self._intake_open = True
         self._subscriptions_by_topic: dict[str, Subscription[Any]] = {}
         self._specs: dict[str, TopicSpec] = {}
         self._best_effort: set[str] = set()
         for spec in RECORDED_TOPICS:
             self._record(spec)
         self._stop = threading.Event()
+        self._give_up = threading.Event()
         self._writer_error: BaseException | None = None
         self._writer_thread = threading.Thread(target=self._write_loop, name="bag_writer")
         self._writer_thread.start()
@@ -120,6 +162,7 @@ class RecorderNode(Node):
             topic, spec.msgtype, offered_qos=[LATCHED_QOS if latched else STREAM_QOS]
         )
         self.counts[topic] = 0
+        self.dropped[topic] = 0
         self._specs[topic] = spec
         if not latched:
             self.gaps[topic] = StreamGaps(pauses=pauses_between_runs(spec.name))
@@ -128,8 +171,20 @@ class RecorderNode(Node):
     def _subscribe(self, topic: str, profile: QoSProfile) -> None:
         queue = self._queue
         clock = self.get_clock()
+        dropped = self.dropped
+        dropped_stamps = self._dropped_stamps
 
         def on_message(data: bytes) -> None:
+            if not self._intake_open:
+                return  # arrived after the stop: not part of the recording
+            if len(queue) >= self.max_queue:
+                # The writer is far behind: drop and count, never block and never grow
+                # without bound. Past _MAX_DROPPED_STAMPS of them (a writer that died) the
+                # stamps go unseen too, and the gap count finds those samples instead.
+                if len(dropped_stamps) < _MAX_DROPPED_STAMPS:
+                    dropped[topic] += 1
+                    dropped_stamps.append((topic, header_stamp_ns(data)))
+                return
             queue.append((topic, data, clock.now().nanoseconds))
 
         spec = self._specs[topic]
@@ -172,23 +227,38 @@ class RecorderNode(Node):
     def _drain(self) -> None:
         queue = self._queue
         self.queue_max = max(self.queue_max, len(queue))
+        self._note_dropped()
         while queue:
+            if self._give_up.is_set():
+                return  # close() counts what is left
             topic, data, now_ns = queue.popleft()
             self.writer.write(topic, data, now_ns, now_ns)
             self.counts[topic] += 1
-            gaps = self.gaps.get(topic)
-            if gaps is not None:
-                stamp_ns = header_stamp_ns(data)
-                if stamp_ns is not None:
-                    gaps.add(stamp_ns)
+            self._note_stamp(topic, header_stamp_ns(data))
+
+    def _note_stamp(self, topic: str, stamp_ns: int | None) -> None:
+        """A sample of ``topic`` arrived: the gap count must not count it lost."""
+        gaps = self.gaps.get(topic)
+        if gaps is not None and stamp_ns is not None:
+            gaps.add(stamp_ns)
+
+    def _note_dropped(self) -> None:
+        """Stamps of samples dropped at intake (writer thread, or close once it stopped)."""
+        while self._dropped_stamps:
+            self._note_stamp(*self._dropped_stamps.popleft())
 
     # -- reporting ------------------------------------------------------------------------
     def loss_summary(self) -> dict[str, dict[str, Any]]:
-        """Per topic: samples written, samples lost, gaps, longest gap [s], learned period."""
+        """Per topic: samples written, samples lost, gaps, longest gap [s], learned period.
+
+        ``lost`` is what never arrived (gaps in the stamps of every sample received) plus
+        what arrived and the recorder could not write (``dropped_by_recorder``).
+        """
         return {
             topic: {
                 "samples": self.counts[topic],
-                "lost": g.lost,
+                "lost": g.lost + self.dropped[topic],
+                "dropped_by_recorder": self.dropped[topic],
                 "gaps": g.gap_count,
                 "longest_gap_s": round(g.longest_s, 4),
                 "period_s": None if g.period_s is None else round(g.period_s, 6),
@@ -202,6 +272,9 @@ class RecorderNode(Node):
             "samples_lost", json.dumps({t: s["lost"] for t, s in summary.items()})
         )
         self.writer.set_custom_data("gaps", json.dumps({t: s["gaps"] for t, s in summary.items()}))
+        self.writer.set_custom_data(
+            "dropped_by_recorder", json.dumps({t: n for t, n in self.dropped.items() if n})
+        )
 
     def _publish_diagnostics(self) -> None:
         self._adapt_qos()
@@ -209,9 +282,11 @@ class RecorderNode(Node):
             self._store_losses()
         values: dict[str, object] = {"bag_path": str(self.bag_path)}
         values.update({f"count {t}": n for t, n in self.counts.items()})
-        lost = {t: g.lost for t, g in self.gaps.items()}
+        lost = {t: g.lost + self.dropped[t] for t, g in self.gaps.items()}
         values.update({f"lost {t}": n for t, n in lost.items()})
         values.update({f"gaps {t}": g.gap_count for t, g in self.gaps.items()})
+        values.update({f"dropped {t}": n for t, n in self.dropped.items() if n})
+        values["queue"] = len(self._queue)
         values["queue_max"] = self.queue_max
         values["realtime"] = self.realtime
         values["best_effort_topics"] = ", ".join(sorted(self._best_effort))
@@ -234,14 +309,33 @@ class RecorderNode(Node):
         )
 
     def close(self) -> None:
-        """Write what is queued, store the loss counts and finish the bag (idempotent)."""
+        """Finish the bag (idempotent), with what it could not write counted.
+
+        Writes what is queued for up to ``close_timeout_s``, counts the rest as lost, stores
+        the loss counts and closes the file.
+        """
+        self._intake_open = False
         self._stop.set()
-        self._writer_thread.join(10.0)
+        self._writer_thread.join(self.close_timeout_s)
+        if self._writer_thread.is_alive():
+            self._give_up.set()  # the writer stops after the message in hand
+            self._writer_thread.join()
+        self._note_dropped()
+        while self._queue:
+            topic, data, _now_ns = self._queue.popleft()
+            self.dropped[topic] += 1
+            self._note_stamp(topic, header_stamp_ns(data))
         if not self.writer.closed:
             self._store_losses()
-            lost = {t: g.lost for t, g in self.gaps.items() if g.lost}
+            lost = {t: s["lost"] for t, s in self.loss_summary().items() if s["lost"]}
             if lost:
                 self.get_logger().warning(f"bag {self.bag_path} lacks samples: {lost}")
+            dropped = {t: n for t, n in self.dropped.items() if n}
+            if dropped:
+                self.get_logger().warning(
+                    f"the recorder itself dropped {dropped} (queue full, or unwritten "
+                    f"{self.close_timeout_s:g} s after the stop)"
+                )
         self.writer.close()
 
 
