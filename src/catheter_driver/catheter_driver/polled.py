@@ -28,11 +28,22 @@ class PolledTopics:
         owner: the node the topics belong to (its context and namespace are used).
         topics: topic name -> message type.
         qos: QoS of every subscription (keep-last; the depth bounds the work per poll).
+        raw: take serialized bytes (enough to know a message came); False for messages.
+        suffix: the helper node's name is the owner's plus this (one helper per use).
     """
 
-    def __init__(self, owner: Node, topics: Mapping[str, type], qos: QoSProfile) -> None:
+    def __init__(
+        self,
+        owner: Node,
+        topics: Mapping[str, type],
+        qos: QoSProfile,
+        *,
+        raw: bool = True,
+        suffix: str = "_polled",
+    ) -> None:
+        self._raw = raw
         self.node = rclpy.create_node(
-            f"{owner.get_name()}_polled",
+            f"{owner.get_name()}{suffix}",
             context=owner.context,
             namespace=owner.get_namespace(),
             enable_rosout=False,
@@ -40,7 +51,7 @@ class PolledTopics:
         )
         # raw=True: the loop only needs to know a message came, not to deserialise it.
         self._subs = {
-            name: self.node.create_subscription(msg_type, name, _never_called, qos, raw=True)
+            name: self.node.create_subscription(msg_type, name, _never_called, qos, raw=raw)
             for name, msg_type in topics.items()
         }
 
@@ -55,6 +66,15 @@ class PolledTopics:
             if got:
                 fresh.append(name)
         return fresh
+
+    def take(self, name: str) -> list[Any]:
+        """Every message of ``name`` waiting, oldest first (bytes if ``raw``)."""
+        sub = self._subs[name]
+        taken = []
+        with sub.handle:
+            while (got := sub.handle.take_message(sub.msg_type, self._raw)) is not None:
+                taken.append(got[0])
+        return taken
 
     def destroy(self) -> None:
         """Destroy the helper node and its subscriptions."""

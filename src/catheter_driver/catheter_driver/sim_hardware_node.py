@@ -16,6 +16,7 @@ from catheter_driver import diagnostics, messages, qos
 from catheter_driver.loop_node import LoopNode
 from catheter_driver.node_main import run_node
 from catheter_driver.params import declare_float, declare_int, declare_plain
+from catheter_driver.polled import PolledTopics
 from catheter_driver.rt_loop import LatencyWindow
 from catheter_driver.sim_hardware import SimHardware
 from catheter_models.contract import PRESSURE_COMMAND, PRESSURE_MEASURED, TIP_ANGLE, TIP_DISTANCE
@@ -67,8 +68,16 @@ class SimHardwareNode(LoopNode):
         self._pub_distance = self.create_publisher(Range, TIP_DISTANCE.name, qos.STREAM)
         self._pub_angle = self.create_publisher(JointState, TIP_ANGLE.name, qos.STREAM)
         self._pub_diag = diagnostics.create_diagnostics_publisher(self)
-        self.create_subscription(
-            FluidPressure, PRESSURE_COMMAND.name, self._on_command, qos.KEEP_EVERY_SAMPLE
+        # Taken by the loop at each tick, not dispatched by the executor: at 1 kHz beside two
+        # busy loops the executor fell behind and the rig applied commands up to 235 ms old
+        # (p99), one by one from its queue. The loop drains every waiting command each tick
+        # (each counted and checked; the newest in force), so none waits longer than a tick.
+        self._commands = PolledTopics(
+            self,
+            {PRESSURE_COMMAND.name: FluidPressure},
+            qos.KEEP_EVERY_SAMPLE,
+            raw=False,
+            suffix="_commands",
         )
         self.hw.plant.warm_up()
         self._latency = LatencyWindow()
@@ -79,14 +88,18 @@ class SimHardwareNode(LoopNode):
             f"simulated rig at {rig['sample_rate_hz']:g} Hz, effects on: {', '.join(on) or 'none'}"
         )
 
-    def _on_command(self, msg: FluidPressure) -> None:
-        now_s = time.monotonic()
+    def _on_command(self, msg: FluidPressure, now_s: float) -> None:
         self._latency.add((self.stamp_ns(now_s) - messages.ns_from_time(msg.header.stamp)) * 1e-9)
         gauge_pa = messages.gauge_pa_from(msg, self.ambient_pa)
         if not self.hw.command(gauge_pa, now_s, messages.ns_from_time(msg.header.stamp)):
             self.get_logger().warning(self.hw.last_refusal, throttle_duration_sec=1.0)
 
     def _tick(self, k: int, deadline_s: float) -> None:
+        commands = self._commands.take(PRESSURE_COMMAND.name)
+        if commands:
+            now_s = time.monotonic()
+            for msg in commands:
+                self._on_command(msg, now_s)
         # The rig samples whether or not this thread ran on time: after an overrun, step
         # through every missed sample and publish the backlog with its true stamps, as a
         # sensor driver drains its buffer. Stamps are the sampling instants (monotonic
@@ -100,6 +113,13 @@ class SimHardwareNode(LoopNode):
                 messages.laser_range(sample.distance_m, stamp_ns, *self._range_limits_m)
             )
             self._pub_angle.publish(messages.joint_state(sample.angle_rad, stamp_ns))
+
+    def destroy_node(self) -> None:
+        """Stop the loop (which takes the commands) before their helper node goes."""
+        super().destroy_node()
+        commands = getattr(self, "_commands", None)
+        if commands is not None:
+            commands.destroy()
 
     def _publish_diagnostics(self) -> None:
         counters = self.hw.counters()

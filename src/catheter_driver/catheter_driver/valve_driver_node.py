@@ -26,6 +26,7 @@ from catheter_driver.lifecycle_util import device_options
 from catheter_driver.loop_node import declare_rt_priority, make_process_realtime
 from catheter_driver.node_main import run_node
 from catheter_driver.params import declare_float, declare_plain
+from catheter_driver.polled import PolledTopics
 from catheter_driver.rt_loop import DeadlineLoop, LatencyWindow, MonotonicStamper
 from catheter_driver.valve_core import ValveDriverCore
 from catheter_models.contract import PRESSURE_COMMAND, PRESSURE_MEASURED
@@ -72,10 +73,18 @@ class ValveDriverNode(LifecycleNode):
         )
         self._pub_diag = diagnostics.create_diagnostics_publisher(self)
         # Every command is counted (and every NaN refused and reported), so none may be
-        # dropped in the queue while this thread is busy.
-        self.create_subscription(
-            FluidPressure, PRESSURE_COMMAND.name, self._on_command, qos.KEEP_EVERY_SAMPLE
+        # dropped in the queue; and none may wait there: the control loop drains every
+        # waiting command each tick (the newest in force), rather than an executor that, on
+        # a busy machine, fell behind and fed the valve commands up to 235 ms old.
+        self._commands = PolledTopics(
+            self,
+            {PRESSURE_COMMAND.name: FluidPressure},
+            qos.KEEP_EVERY_SAMPLE,
+            raw=False,
+            suffix="_commands",
         )
+        self.commands_ignored_inactive = 0
+        """Commands that arrived while the driver was not active: never applied."""
         self.create_service(Trigger, "~/vent", self._on_vent)
         if self.allow_enable:
             self.create_service(SetBool, "~/enable", self._on_enable)
@@ -126,6 +135,8 @@ class ValveDriverNode(LifecycleNode):
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Start the control loop and the transmitter poll."""
         make_process_realtime(self, self.rt_priority)
+        # Whatever came while inactive is old news: counted, never applied.
+        self.commands_ignored_inactive += len(self._commands.take(PRESSURE_COMMAND.name))
         # The valve's loop outranks the transmitter poll: a slow serial reply must not
         # delay the watchdog or a command.
         self._loops = [
@@ -167,6 +178,15 @@ class ValveDriverNode(LifecycleNode):
         """Process exit: vent and close (idempotent)."""
         self._close("process exiting")
 
+    def destroy_node(self) -> None:
+        """Stop the loops (which take the commands) before their helper node goes."""
+        for loop in self._loops:
+            loop.stop()
+        super().destroy_node()
+        commands = getattr(self, "_commands", None)
+        if commands is not None:
+            commands.destroy()
+
     def _stop_loops_and_vent(self, why: str) -> None:
         for loop in self._loops:
             loop.stop()
@@ -187,11 +207,7 @@ class ValveDriverNode(LifecycleNode):
         self.get_logger().error(reason, throttle_duration_sec=5.0)
 
     # -- data path -----------------------------------------------------------------------
-    def _on_command(self, msg: FluidPressure) -> None:
-        core = self.core
-        if core is None:
-            return
-        now_s = time.monotonic()
+    def _on_command(self, core: ValveDriverCore, msg: FluidPressure, now_s: float) -> None:
         self._latency.add(
             (self._stamper.ns(now_s) - messages.ns_from_time(msg.header.stamp)) * 1e-9
         )
@@ -206,6 +222,11 @@ class ValveDriverNode(LifecycleNode):
         core = self.core
         if core is None:
             return
+        commands = self._commands.take(PRESSURE_COMMAND.name)
+        if commands:
+            now_s = time.monotonic()
+            for msg in commands:
+                self._on_command(core, msg, now_s)
         tick = core.tick_setpoint(deadline_s, 1.0 / self.rate_hz)
         if tick.state != self._last_tick_state:
             if tick.state != "ok":
@@ -261,6 +282,7 @@ class ValveDriverNode(LifecycleNode):
                 {
                     "setpoint_bar": f"{core.setpoint_pa / 1e5:.4f}",
                     "commands_received": core.commands_received,
+                    "commands_ignored_inactive": self.commands_ignored_inactive,
                     "commands_refused_nonfinite": core.commands_refused,
                     "commands_refused_out_of_order": core.commands_out_of_order,
                     "commands_clamped": core.commands_clamped,
