@@ -5,6 +5,7 @@ quiet and when it is sent a trajectory it must refuse (killed: test_faults.py)."
 from __future__ import annotations
 
 import json
+import signal
 import sys
 import time
 from pathlib import Path
@@ -31,9 +32,10 @@ from sensor_msgs.msg import FluidPressure, JointState
 from trajectory_msgs.msg import JointTrajectory
 
 from catheter_control import qos
-from catheter_control.qos import RECORD, STREAM
+from catheter_control.qos import RECORD
 from catheter_models.contract import (
     ANGLE_DESIRED,
+    DEFAULT_NAMESPACE,
     DIAGNOSTICS,
     PRESSURE_COMMAND,
     PRESSURE_MEASURED,
@@ -49,6 +51,7 @@ pytestmark = [
 ]
 
 RAW_ANGLE = "tip/angle_raw"
+ANGLE_RELAY = Path(__file__).with_name("angle_relay.py")
 
 # Tracking bounds [deg] for the shipped c-LSTM over DDS, per thesis trajectory. The benchmark
 # (docs/benchmarks.md) measured, open loop with the plant in the loop, RMSE 0.19 / 0.22 /
@@ -87,9 +90,14 @@ def _start_rig_and_compensator(
 ) -> None:
     sim = node_argv("catheter_driver.sim_hardware_node")
     if relay_angle:
-        # The rig's laser goes to a topic the test relays to tip/angle, so the test can stop
-        # tip/angle (as a failing laser would) while the rig runs on.
+        # The rig's laser goes to a topic a relay process (a stand-in laser driver) passes on
+        # to tip/angle, so the test can stop tip/angle (SIGSTOP, as a hung laser driver would)
+        # while the rig runs on.
         sim += ["-r", f"{TIP_ANGLE.name}:={RAW_ANGLE}"]
+        children.start(
+            "angle_relay",
+            [sys.executable, str(ANGLE_RELAY), "--ros-args", "-r", f"__ns:={DEFAULT_NAMESPACE}"],
+        )
     children.start("sim_hardware", sim)
     children.start("compensator", node_argv("catheter_control.compensator_node", compensator))
 
@@ -176,14 +184,7 @@ def test_tip_angle_stopping_ramps_the_pressure_down_and_says_why(
         children, {"require_tip_angle": True, "sensor_timeout_s": 0.1}, relay_angle=True
     )
     with Probe(children.domain_id) as probe:
-        relay_on = True
-        angle_pub = probe.node.create_publisher(JointState, TIP_ANGLE.name, STREAM)
-
-        def relay(msg: JointState) -> None:
-            if relay_on:
-                angle_pub.publish(msg)
-
-        probe.node.create_subscription(JointState, RAW_ANGLE, relay, RECORD)
+        relay = children.procs["angle_relay"]
         commands = probe.subscribe(FluidPressure, PRESSURE_COMMAND.name, RECORD)
         desired = probe.subscribe(JointState, ANGLE_DESIRED.name, RECORD)
         measured = probe.subscribe(FluidPressure, PRESSURE_MEASURED.name, RECORD)
@@ -219,7 +220,7 @@ def test_tip_angle_stopping_ramps_the_pressure_down_and_says_why(
 
         # The laser goes quiet.
         n_diag = len(diags)
-        relay_on = False
+        relay.send_signal(signal.SIGSTOP)
         t_fault = time.monotonic()
         status_found = probe.spin_until(
             lambda: any(
@@ -269,7 +270,7 @@ def test_tip_angle_stopping_ramps_the_pressure_down_and_says_why(
         assert len(commands) == n_cmd, "commands without the laser"
 
         # The laser is back: the next trajectory runs, from a clean compensator state.
-        relay_on = True
+        relay.send_signal(signal.SIGCONT)
         probe.spin_for(0.3)
         n_diag = len(diags)
         _send(probe, pub, trajectory_msg([(0.0, 0.0), (1.0, 5.0), (2.0, 0.0)]))
