@@ -363,3 +363,29 @@ def test_not_a_bag(tmp_path: Path) -> None:
     junk.write_bytes(b"not an mcap file at all, just text" * 4)
     with pytest.raises(BagError, match="not an MCAP file"):
         load_bag(junk)
+
+
+@pytest.mark.parametrize("compression", ["none", "zstd"])
+def test_a_bag_damaged_inside_a_chunk_is_refused_as_damaged(
+    tmp_path: Path, compression: str
+) -> None:
+    t = np.arange(5000) / 250.0
+    noise = np.random.default_rng(3).normal(size=(3, t.size))  # chunks that do not shrink
+    bag = write_bag_from_arrays(
+        tmp_path / "bag",
+        t,
+        1e5 + 1e3 * noise[0],
+        1e5 + 1e3 * noise[1],
+        0.1 * noise[2],
+        compression=compression,
+    )
+    mcap = next(bag.glob("*.mcap"))
+    data = bytearray(mcap.read_bytes())
+    third = len(data) // 3
+    data[third : third + 64] = bytes(b ^ 0xFF for b in data[third : third + 64])
+    mcap.write_bytes(bytes(data))
+    # Uncompressed, the chunk's checksum catches it; compressed, the decompressor fails
+    # first. Either way a BagError that names the bag, not a decoder's own exception.
+    with pytest.raises(BagError, match="is damaged") as info:
+        load_bag(bag)
+    assert str(bag) in str(info.value)

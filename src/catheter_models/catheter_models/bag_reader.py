@@ -42,7 +42,12 @@ from catheter_models.contract import (
     TopicSpec,
     qualify,
 )
-from catheter_models.errors import BagError, MissingTopicError, ParameterError
+from catheter_models.errors import (
+    BagError,
+    CatheterError,
+    MissingTopicError,
+    ParameterError,
+)
 from catheter_models.gaps import describe_gaps, pauses_between_runs
 from catheter_models.units import AMBIENT_PRESSURE_PA, NS_PER_S
 
@@ -318,9 +323,23 @@ def load_bag(
             resolved = _resolve_all(layout.path, wanted, available, namespace, must_have)
             start_ns = int(reader.start_time)
             collected = _collect(reader, resolved, ambient_pa)
+    except CatheterError:
+        raise
     except (AnyReaderError, Rosbag2ReaderError) as exc:
-        msg = f"bag {layout.path} cannot be read as a rosbag2 bag: {exc}"
+        if "checksum" in str(exc).lower() or "crc" in str(exc).lower():
+            msg = f"bag {layout.path} is damaged (a checksum does not match): {exc}"
+        else:
+            msg = f"bag {layout.path} cannot be read as a rosbag2 bag: {exc}"
         raise BagError(msg) from None
+    except Exception as exc:
+        # Damaged bytes inside a chunk surface from whatever decodes them (the zstd or lz4
+        # decompressor, the CDR deserializer) as their own exception types.
+        msg = (
+            f"bag {layout.path} is damaged: reading it failed with {type(exc).__name__}: {exc}. "
+            "Its footer is intact, so this is not a cut-off recording (`catheter-lab bag "
+            "repair` does not apply); record it again or restore it from a copy"
+        )
+        raise BagError(msg) from exc
 
     empty = [acc.topic for acc in collected.values() if acc.name in must_have and not acc.values]
     if empty:
