@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 PY := $(BIN)/python
 PRESET ?= traj_descending_sine
 
-.PHONY: setup demo test test-loaded test-fast test-slow lint typecheck bench bench-models soak faults lab-example figures \
+.PHONY: setup demo test test-loaded test-fast test-slow lint typecheck bench bench-models soak soak-loaded faults lab-example figures \
 	sample-bags shipped-models colcon clean
 
 setup: $(VENV)/.installed
@@ -55,6 +55,11 @@ bench: setup
 soak: setup
 	$(PY) bench/bench_soak.py
 	$(PY) scripts/soak_section.py bench/results/soak.json --docs docs/reliability.md
+
+## The same beside two busy loops (a lab PC doing other work): bench/results/soak_loaded.json.
+soak-loaded: setup
+	$(PY) bench/bench_soak.py --hogs 2
+	$(PY) scripts/soak_section.py bench/results/soak_loaded.json --docs docs/reliability.md
 
 ## Fault-injection suite (tests marked `fault`, about 3 minutes): every fault, its invariants
 ## and its time to a safe state, written into docs/reliability.md's table.

@@ -2,10 +2,14 @@
 
     .venv/bin/python bench/bench_soak.py
     .venv/bin/python scripts/soak_section.py bench/results/soak.json --docs docs/reliability.md
+    .venv/bin/python bench/bench_soak.py --hogs 2
+    .venv/bin/python scripts/soak_section.py bench/results/soak_loaded.json \
+        --docs docs/reliability.md
 
-Prints the section (run, missed deadlines per minute, RSS per process, messages per topic,
-verdicts) and, with ``--docs``, writes it between ``<!-- soak:begin -->`` and
-``<!-- soak:end -->``.
+Prints the section (run, missed deadlines per minute, command latency, RSS per process,
+messages per topic, sensor stalls, verdicts) and, with ``--docs``, writes it between
+``<!-- <stem>:begin -->`` and ``<!-- <stem>:end -->``, the stem being the JSON's (``soak``,
+``soak_loaded``).
 """
 
 from __future__ import annotations
@@ -18,21 +22,34 @@ from typing import Any
 
 from doc_markers import write_between
 
-BEGIN, END = "<!-- soak:begin -->", "<!-- soak:end -->"
+
+def markers(stem: str) -> tuple[str, str]:
+    """The markers a result's section sits between in the docs."""
+    return f"<!-- {stem}:begin -->", f"<!-- {stem}:end -->"
 
 
 def _f(value: float | None, spec: str) -> str:
     return "n/a" if value is None else format(value, spec)
 
 
-def section(result: dict[str, Any]) -> str:
-    """Markdown for one soak result (bench_soak.py's JSON)."""
+def section(result: dict[str, Any], stem: str = "soak") -> str:
+    """Markdown for one soak result (bench_soak.py's JSON, saved as ``<stem>.json``)."""
     v, missed, bag = result["verdicts"], result["missed_deadlines"], result["bag"]
     machine = result.get("machine", {})
     frac = missed.get("fraction")
+    hogs = int(result.get("cpu_hogs") or 0)
+    command = (
+        "`make soak` (`bench/bench_soak.py`"
+        if not hogs
+        else (
+            f"`bench/bench_soak.py --hogs {hogs}` (beside {hogs} busy loops at normal priority, "
+            "a lab PC doing other work;"
+        )
+    )
+    timing = result.get("timing", {})
     lines = [
-        f"`make soak` (`bench/bench_soak.py`, figures in `bench/results/soak.json`, plot "
-        f"`bench/results/soak.png`): the whole simulated graph (recorder, `sim_hardware`, "
+        f"{command} figures in `bench/results/{stem}.json`, plot "
+        f"`bench/results/{stem}.png`): the whole simulated graph (recorder, `sim_hardware`, "
         f"`compensator` with the shipped c-LSTM, each its own process) at "
         f"{result['control_rate_hz']:g} Hz for {result['duration_s']:g} s, following thesis "
         "trajectories 4 and 1 over and over, the recorder on"
@@ -72,6 +89,33 @@ def section(result: dict[str, Any]) -> str:
             + f" (the bound: an increase beyond {result['bounds']['missed_growth_sigmas']:g} "
             "Poisson standard deviations)."
         )
+    if timing.get("command_latency_p99_ms") is not None:
+        lines.append(
+            f"- **Command latency** (the compensator's tick to the driver's tick that applied "
+            f"it): p50 {_f(timing.get('command_latency_p50_ms'), '.2f')} ms, p99 "
+            f"{_f(timing.get('command_latency_p99_ms'), '.2f')} ms, max "
+            f"{_f(timing.get('command_latency_max_ms'), '.2f')} ms."
+        )
+    stalls = result.get("stalls", {})
+    if stalls.get("measured"):
+        where = "; ".join(f"{w}: {n}" for w, n in sorted(stalls["by_where"].items()))
+        lines.append(
+            f"- **Sensor stalls:** {stalls['seconds_with_a_stall']} second(s) in which a sensor "
+            f"the compensator needs went quiet for over {stalls['stall_ms']:g} ms"
+            + (
+                f" ({where}; a loop counts as behind past {stalls['behind_ms']:g} ms)"
+                if where
+                else ""
+            )
+            + "."
+        )
+        for row in stalls["rows"][:8]:
+            quiet = ", ".join(f"`{k}` {val:.0f} ms" for k, val in row["silence_ms"].items())
+            lines.append(
+                f"  At {row['t_s']:.0f} s: {quiet}; the compensator's loop "
+                f"{_f(row['compensator_behind_ms'], '.0f')} ms behind, the driver's "
+                f"{_f(row['driver_behind_ms'], '.0f')} ms."
+            )
     bounds = result["bounds"]
     lines += [
         f"- **Memory:** RSS per process, sampled every second; growth is a fitted slope above "
@@ -124,7 +168,7 @@ def section(result: dict[str, Any]) -> str:
         + ("agree" if v["bag_counts_consistent"] else "**disagree**")
         + ".",
         "",
-        "![soak](../bench/results/soak.png)",
+        f"![{stem}](../bench/results/{stem}.png)",
     ]
     return "\n".join(lines) + "\n"
 
@@ -137,10 +181,11 @@ def main(argv: list[str] | None = None) -> int:
     if not args.result.is_file():
         print(f"soak_section: {args.result} does not exist; run the soak first", file=sys.stderr)
         return 2
-    text = section(json.loads(args.result.read_text()))
+    stem = args.result.name.split(".")[0]
+    text = section(json.loads(args.result.read_text()), stem)
     print(text)
     if args.docs:
-        write_between(args.docs, BEGIN, END, text)
+        write_between(args.docs, *markers(stem), text)
         print(f"written into {args.docs}")
     return 0
 
