@@ -463,6 +463,13 @@ def _run(
             # streams this run was scored on (from their stamps).
             "bag_samples_lost": losses["bag"],
             "scored_samples_lost": losses["scored"],
+            # How far the recorder's writer fell behind its intake (messages queued at worst,
+            # and at its last report): a queue that only grows would end in drops.
+            "recorder_queue": {
+                k: int(data.recorder[k])
+                for k in ("queue", "queue_max")
+                if str(data.recorder.get(k, "")).isdigit()
+            },
             # The compensator's 1 Hz reports over the run: where in it deadlines were missed,
             # how far behind its loop fell and how long each sensor it needs went quiet.
             "timing_series": [

@@ -45,11 +45,11 @@ from catheter_models.errors import ParameterError
 from catheter_models.gaps import StreamGaps, header_stamp_ns, pauses_between_runs
 
 RECORDER_RT_PRIORITY = 0
-"""Normal scheduling by default. 10 (below the loops at 50 and their nodes' other threads at
-20, above every normal process) kept every sensor sample at 1 kHz on 2 cores where normal
-scheduling lost a third, but the compensator then missed 4.3 % of its deadlines instead of
-1.2 %: on a machine that small the recorder and the control loop cannot both have a core, and
-the default favours control. See docs/interfaces.md."""
+"""Normal scheduling by default: since the drivers take commands in their loop, the recorder at
+normal priority keeps every sample at 1 kHz on 2 cores beside two busy loops. Before that,
+normal scheduling lost a third at 1 kHz and 10 (below the loops at 50 and their nodes' other
+threads at 20, above every normal process) was needed, at the cost of 4.3 % missed deadlines
+instead of 1.2 %; the default favours control. See docs/interfaces.md."""
 
 _DRAIN_S = 0.005
 """How often the writer thread looks for queued messages [s] (cheaper than a wake-up each)."""
