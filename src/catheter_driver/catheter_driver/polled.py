@@ -15,6 +15,10 @@ from typing import Any
 import rclpy
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
+from sensor_msgs.msg import FluidPressure
+
+from catheter_driver.qos import KEEP_EVERY_SAMPLE
+from catheter_models.contract import PRESSURE_COMMAND
 
 
 def _never_called(_msg: Any) -> None:
@@ -79,3 +83,28 @@ class PolledTopics:
     def destroy(self) -> None:
         """Destroy the helper node and its subscriptions."""
         self.node.destroy_node()
+
+
+class PressureCommands:
+    """A driver's ``pressure/command`` input, taken by its loop at each tick.
+
+    Every command is counted and every bad one refused, so none may drop from a short queue
+    (``qos.KEEP_EVERY_SAMPLE``); and none may wait there: when the executor dispatched them,
+    at 1 kHz beside two busy loops it fell behind and the rig applied commands up to 235 ms
+    old (p99), one by one. The loop drains every waiting command each tick (each checked, the
+    newest in force), so none waits longer than a tick.
+    """
+
+    def __init__(self, owner: Node) -> None:
+        self._name = PRESSURE_COMMAND.name
+        self._topics = PolledTopics(
+            owner, {self._name: FluidPressure}, KEEP_EVERY_SAMPLE, raw=False, suffix="_commands"
+        )
+
+    def take(self) -> list[Any]:
+        """Every command waiting, oldest first (``sensor_msgs/FluidPressure``)."""
+        return self._topics.take(self._name)
+
+    def destroy(self) -> None:
+        """Destroy the subscription's helper node."""
+        self._topics.destroy()

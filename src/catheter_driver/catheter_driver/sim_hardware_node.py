@@ -16,10 +16,10 @@ from catheter_driver import diagnostics, messages, qos
 from catheter_driver.loop_node import LoopNode
 from catheter_driver.node_main import run_node
 from catheter_driver.params import declare_float, declare_int, declare_plain
-from catheter_driver.polled import PolledTopics
+from catheter_driver.polled import PressureCommands
 from catheter_driver.rt_loop import LatencyWindow
 from catheter_driver.sim_hardware import SimHardware
-from catheter_models.contract import PRESSURE_COMMAND, PRESSURE_MEASURED, TIP_ANGLE, TIP_DISTANCE
+from catheter_models.contract import PRESSURE_MEASURED, TIP_ANGLE, TIP_DISTANCE
 from catheter_models.plant.config import EFFECTS, RIG_PARAMS, ParamSpec, PlantConfig
 
 _MAX_PRESSURE = ParamSpec(
@@ -68,17 +68,7 @@ class SimHardwareNode(LoopNode):
         self._pub_distance = self.create_publisher(Range, TIP_DISTANCE.name, qos.STREAM)
         self._pub_angle = self.create_publisher(JointState, TIP_ANGLE.name, qos.STREAM)
         self._pub_diag = diagnostics.create_diagnostics_publisher(self)
-        # Taken by the loop at each tick, not dispatched by the executor: at 1 kHz beside two
-        # busy loops the executor fell behind and the rig applied commands up to 235 ms old
-        # (p99), one by one from its queue. The loop drains every waiting command each tick
-        # (each counted and checked; the newest in force), so none waits longer than a tick.
-        self._commands = PolledTopics(
-            self,
-            {PRESSURE_COMMAND.name: FluidPressure},
-            qos.KEEP_EVERY_SAMPLE,
-            raw=False,
-            suffix="_commands",
-        )
+        self._commands = PressureCommands(self)  # taken by the loop, see PressureCommands
         self.hw.plant.warm_up()
         self._latency = LatencyWindow()
         self.create_loop(rig["sample_rate_hz"], self._tick)
@@ -95,7 +85,7 @@ class SimHardwareNode(LoopNode):
             self.get_logger().warning(self.hw.last_refusal, throttle_duration_sec=1.0)
 
     def _tick(self, k: int, deadline_s: float) -> None:
-        commands = self._commands.take(PRESSURE_COMMAND.name)
+        commands = self._commands.take()
         if commands:
             now_s = time.monotonic()
             for msg in commands:

@@ -26,10 +26,10 @@ from catheter_driver.lifecycle_util import device_options
 from catheter_driver.loop_node import declare_rt_priority, make_process_realtime
 from catheter_driver.node_main import run_node
 from catheter_driver.params import declare_float, declare_plain
-from catheter_driver.polled import PolledTopics
+from catheter_driver.polled import PressureCommands
 from catheter_driver.rt_loop import DeadlineLoop, LatencyWindow, MonotonicStamper
 from catheter_driver.valve_core import ValveDriverCore
-from catheter_models.contract import PRESSURE_COMMAND, PRESSURE_MEASURED
+from catheter_models.contract import PRESSURE_MEASURED
 from catheter_models.errors import CatheterError
 from catheter_models.plant.config import ParamSpec
 from catheter_models.units import AMBIENT_PRESSURE_PA
@@ -72,17 +72,7 @@ class ValveDriverNode(LifecycleNode):
             FluidPressure, PRESSURE_MEASURED.name, qos.STREAM
         )
         self._pub_diag = diagnostics.create_diagnostics_publisher(self)
-        # Every command is counted (and every NaN refused and reported), so none may be
-        # dropped in the queue; and none may wait there: the control loop drains every
-        # waiting command each tick (the newest in force), rather than an executor that, on
-        # a busy machine, fell behind and fed the valve commands up to 235 ms old.
-        self._commands = PolledTopics(
-            self,
-            {PRESSURE_COMMAND.name: FluidPressure},
-            qos.KEEP_EVERY_SAMPLE,
-            raw=False,
-            suffix="_commands",
-        )
+        self._commands = PressureCommands(self)  # taken by the control loop
         self.commands_ignored_inactive = 0
         """Commands that arrived while the driver was not active: never applied."""
         self.create_service(Trigger, "~/vent", self._on_vent)
@@ -136,7 +126,7 @@ class ValveDriverNode(LifecycleNode):
         """Start the control loop and the transmitter poll."""
         make_process_realtime(self, self.rt_priority)
         # Whatever came while inactive is old news: counted, never applied.
-        self.commands_ignored_inactive += len(self._commands.take(PRESSURE_COMMAND.name))
+        self.commands_ignored_inactive += len(self._commands.take())
         # The valve's loop outranks the transmitter poll: a slow serial reply must not
         # delay the watchdog or a command.
         self._loops = [
@@ -222,7 +212,7 @@ class ValveDriverNode(LifecycleNode):
         core = self.core
         if core is None:
             return
-        commands = self._commands.take(PRESSURE_COMMAND.name)
+        commands = self._commands.take()
         if commands:
             now_s = time.monotonic()
             for msg in commands:
