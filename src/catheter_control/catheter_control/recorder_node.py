@@ -58,7 +58,8 @@ MAX_QUEUE = 100_000
 """Messages the intake may hold for the writer: 20 s of the whole contract at 1 kHz (5,000
 messages/s, about 100 B each, so about 10 MB). Beyond it a message is dropped and counted,
 rather than the recorder growing until the machine swaps (measured at 1 kHz beside two busy
-loops: the writer, at normal priority, fell minutes behind)."""
+loops, before the drivers took commands in their loop: most of a 60 s run was still queued
+when the graph stopped)."""
 
 _MAX_DROPPED_STAMPS = 100_000
 """Stamps of dropped samples kept for the gap count between writer passes (about 10 MB)."""
