@@ -4,7 +4,8 @@ The reference is the rig itself: it produces one sample every 4 ms (250 Hz, thes
 so "x real time" is simulated time per wall-clock time. The simulated hardware node needs
 the streaming step far inside one period; offline data generation wants the batch path as
 fast as possible. There is deliberately no pure-Python copy of the kernel to compare
-against (docs/style.md: hot loops are written once).
+against: hot loops are written once, so batch and streaming cannot disagree
+(docs/simulated_rig.md).
 
 Run with ``make bench`` (``.venv/bin/python bench/bench_plant.py``). Prints a table and
 writes ``bench/results/plant.json``.

@@ -1,7 +1,7 @@
 """A fixed-rate loop on its own thread, against absolute deadlines on the monotonic clock.
 
 rclpy timers showed p99 period errors of several milliseconds at 250 Hz here
-(docs/architecture.md), so real-time paths do not use them. Deadlines are absolute
+(docs/reliability.md), so real-time paths do not use them. Deadlines are absolute
 (``t0 + k * period``): a late tick does not push every later tick back.
 """
 

@@ -1,6 +1,6 @@
 """The simulated rig behind the hardware topics, without ROS.
 
-It takes the place of the valve, the laser and both drivers (docs/architecture.md), so it
+It takes the place of the valve, the laser and both drivers (docs/simulated_rig.md), so it
 keeps the drivers' safety duties too: commands are checked and clamped, and a watchdog vents
 the muscle when commands stop arriving.
 """

@@ -3,7 +3,7 @@
 Subscribes ``pressure/command``; publishes ``pressure/measured``, ``tip/distance`` and
 ``tip/angle`` at the plant's sample rate (250 Hz), stamped on the plant's clock, and its health
 on ``/diagnostics``. Parameters ``effects.<name>.enabled`` and ``effects.<name>.<param>``
-switch and size every effect of docs/effects.md; ``rig.<param>`` sets the rig.
+switch and size every effect of docs/simulated_rig.md; ``rig.<param>`` sets the rig.
 """
 
 from __future__ import annotations

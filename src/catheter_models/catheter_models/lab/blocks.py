@@ -1,4 +1,4 @@
-"""Physical-effect blocks: the identifiable approximations of docs/effects.md.
+"""Physical-effect blocks: the identifiable approximations of the effect catalogue (docs/lab.md).
 
 A grey-box model is a chain: input blocks (pressure to pressure), the thesis's DRDPI
 (play, rate dependence, deadband, asymmetry and saturation: the default chain), then output

@@ -1,7 +1,7 @@
 """Compare any fitted model with measured recordings, and locate where it fails.
 
 A single RMSE says *how much* a model is off, not *where*. To improve a model (or to decide
-which physical effect it lacks, docs/effects.md) a person needs to see the stretches of a
+which physical effect it lacks, docs/lab.md) a person needs to see the stretches of a
 recording where the error is largest, and in which motion regime they fall: does it fail while
 loading, at the peaks, in the deadband? This module answers that for every model kind, forward
 (pressure -> angle: DRDPI, GPI, SVR, LSTM) or inverse (angle -> pressure: IDRDPI, c-LSTM):

@@ -3,7 +3,7 @@
 A model that has captured the physics leaves a residual that is white and unrelated to the
 input, to the input's rate, to the input's square and to its own past (Billings & Voon 1983,
 1986; Ljung, *System Identification*, 2nd ed., ch. 16.6). Each test here checks one of those
-claims, and a failed test points at a missing effect of docs/effects.md:
+claims, and a failed test points at a missing effect of the catalogue (docs/lab.md):
 
 ===============  ==========================================  =====================================
 name             correlation                                 a significant value suggests

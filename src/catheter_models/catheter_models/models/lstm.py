@@ -11,7 +11,7 @@ Both kinds share one implementation and come in two *forms* (the ``form`` settin
     hidden and cell states ``h0``, ``c0`` [layers, 1, hidden] and returns ``y`` [T, 1, 1],
     ``hn``, ``cn``. :meth:`predict` runs the whole sequence in one call from zero state;
     :meth:`stream` feeds one sample per call and passes the state back in, so a tick costs one
-    LSTM cell step (``docs/architecture.md``, Real time).
+    LSTM cell step (``docs/compensator.md``).
 ``"windowed"`` (the thesis's form)
     Each output comes from the last 50 inputs (eq. 7.4's window), left-padded with the signal
     at rest. The graph takes ``x`` [B, 50, 1] and returns ``y`` [B, 1]; :meth:`predict`

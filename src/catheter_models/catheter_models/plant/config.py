@@ -5,7 +5,7 @@ deadband of about 0-1 bar from rest, about 30 deg of bend at 3 bar, loops that w
 0.2 to 0.8 Hz, laser noise at 250 Hz) and a range. A value outside its range is refused with
 the range named, here and in the ROS parameter descriptors built from the same table.
 
-The effect names are the vocabulary of ``docs/effects.md``. The plant models the *physics*
+The effect names are the vocabulary of the lab's catalogue (``docs/simulated_rig.md``, ``docs/lab.md``). The plant models the *physics*
 of each effect (orifice/tube flow, Dahl friction, Zener creep, ...); the lab's identifiable
 blocks are deliberately different approximations, so a lab test never checks code against
 itself.
@@ -45,7 +45,7 @@ class ParamSpec:
 
 @dataclass(frozen=True)
 class EffectSpec:
-    """A physical effect of ``docs/effects.md`` as the plant implements it."""
+    """A physical effect of the catalogue (``docs/simulated_rig.md``) as the plant implements it."""
 
     name: str
     physics: str
@@ -227,7 +227,7 @@ EFFECTS: Final[Mapping[str, EffectSpec]] = {
         ),
     )
 }
-"""The effect catalogue of docs/effects.md, as the plant's physics implements it."""
+"""The effect catalogue (docs/simulated_rig.md), as the plant's physics implements it."""
 
 RIG_PARAMS: Final[tuple[ParamSpec, ...]] = (
     ParamSpec(
