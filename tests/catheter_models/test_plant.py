@@ -1,4 +1,4 @@
-"""Tests of the simulated rig (catheter_models.plant) against the catalogue of docs/simulated_rig.md.
+"""Tests of the simulated rig (catheter_models.plant) against docs/simulated_rig.md.
 
 Each effect is checked against the plant's *own* physics as config.py documents it (Dahl
 friction scaled by wire tension, orifice flow, Zener creep, ...), usually with every other

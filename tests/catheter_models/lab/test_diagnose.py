@@ -2,7 +2,8 @@
 default chain (the DRDPI) lacks; the lab must name it, identify it and remove the error it
 causes, and must call a model without a hidden effect adequate.
 
-The plant's physics differ from the blocks' forms (docs/simulated_rig.md, docs/lab.md): the plant fills the
+The plant's physics differ from the blocks' forms (docs/simulated_rig.md, docs/lab.md): the
+plant fills the
 muscle through laminar compressible flow (dP/dt ~ P_valve^2 - P_muscle^2, absolute
 pressures), the block is a linear first-order lag; so the test is not code agreeing with
 itself. The effect is set strong enough to dominate the DRDPI's own structural error

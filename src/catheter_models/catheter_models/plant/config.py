@@ -5,7 +5,8 @@ deadband of about 0-1 bar from rest, about 30 deg of bend at 3 bar, loops that w
 0.2 to 0.8 Hz, laser noise at 250 Hz) and a range. A value outside its range is refused with
 the range named, here and in the ROS parameter descriptors built from the same table.
 
-The effect names are the vocabulary of the lab's catalogue (``docs/simulated_rig.md``, ``docs/lab.md``). The plant models the *physics*
+The effect names are the vocabulary of the lab's catalogue (``docs/simulated_rig.md``,
+``docs/lab.md``). The plant models the *physics*
 of each effect (orifice/tube flow, Dahl friction, Zener creep, ...); the lab's identifiable
 blocks are deliberately different approximations, so a lab test never checks code against
 itself.
