@@ -17,11 +17,13 @@ from foreign_plants import PLANTS
 from foreign_plants.cases import draw_case, make_case
 
 from catheter_models.cli import main
+from catheter_models.lab.cores import FreePI
 from catheter_models.lab.diagnose import Candidate, Diagnosis, Floors, diagnose
 from catheter_models.lab.floors import FilterBankReference, noise_std_deg
 from catheter_models.lab.greybox import GreyBox
 from catheter_models.lab.residuals import residual_tests
 from catheter_models.models import load_model
+from catheter_models.models.base import ModelError
 from catheter_models.models.evaluate import pooled_rmse
 
 REPO = Path(__file__).resolve().parents[3]
@@ -60,6 +62,35 @@ def test_a_free_pi_greybox_saves_loads_and_streams(tmp_path: Path, creep_case) -
     np.testing.assert_allclose([stream.step(p) for p in x[:300]], model.predict(x[:300]))
     doc = json.loads((tmp_path / "m" / "greybox.json").read_text())
     assert doc["format"] == 2 and doc["core"]["name"] == "free_pi"
+
+
+def _vented_rms_deg(model: GreyBox, rec) -> float:
+    """RMS error [deg] where the muscle is (nearly) vented: below 0.3 bar, under its knee."""
+    vented = rec.pressure_pa < 0.3e5
+    err = np.degrees(model.predict(rec.pressure_pa) - rec.angle_rad)[vented]
+    return float(np.sqrt(np.mean(err**2)))
+
+
+def test_friction_that_grows_with_tension_lets_a_vented_tip_come_home() -> None:
+    # The Bouc-Wen plant's friction level grows with the wire's load (its own law, not the
+    # core's). Fixed thresholds leave a residual bend after every vent that depends on the
+    # last excursion; thresholds that grow with the pressure do not.
+    case = draw_case(PLANTS["boucwen"], [], 2)
+    fixed = GreyBox(core="free_pi", core_settings={"tension_shares": [0.0]})
+    fixed.fit([case.train], progress=False)
+    grown = GreyBox(core="free_pi").fit([case.train], progress=False)
+    assert isinstance(grown.core_, FreePI) and grown.core_.tension_share > 0.0
+    assert _vented_rms_deg(grown, case.test) < 0.6 * _vented_rms_deg(fixed, case.test)
+    assert pooled_rmse(grown, [case.test]) < 0.8 * pooled_rmse(fixed, [case.test])
+
+
+def test_a_free_pi_file_without_tension_values_loads_with_fixed_thresholds() -> None:
+    # Model files written before the thresholds could grow carry no tension values.
+    core = FreePI()
+    core.load_values({"beta_s": 0.01, "weights": [0.0] * core.n_columns})
+    assert core.tension_share == 0.0 and core.tension_onset_bar == 0.0
+    with pytest.raises(ModelError, match="tension_share"):
+        core.load_values({"beta_s": 0.01, "tension_share": 1.5, "weights": [0.0] * core.n_columns})
 
 
 @pytest.mark.slow

@@ -11,10 +11,17 @@ a lag does) and leaves an error as large as the effect to be found. So the core 
 ``free_pi``
     A Prandtl-Ishlinskii operator with free weights on a grid of play thresholds, applied to
     the pressure shifted by a grid of opening pressures, ``y = c + sum_ij w_ij
-    Φ_{r_i + β|ṡ_j|}[max(p - d_j, 0)]``: the knee, the loop's width and shape at each
+    Φ_{r_i g(p) + β|ṡ_j|}[max(p - d_j, 0)]``: the knee, the loop's width and shape at each
     pressure, saturation (negative weights at high d_j) and asymmetry are all learnt, by
-    linear least squares for each rate factor β. The loop shape is free; the laws it can
-    form are those with the wiping-out property and congruent minor loops (Preisach-like).
+    linear least squares for each rate factor β and tension share γ. The thresholds scale
+    with the pressure above an onset ``p_0``, ``g(p) = 1 - γ + γ (p - p_0)⁺ / (p_ref - p_0)``:
+    the wire's friction in the sheath grows with its tension (the capstan effect), and the
+    muscle pulls only above its opening pressure, so a vented muscle lets the tip come home
+    while a pulled one holds it. With γ = 0 every loop is as wide at rest as under load,
+    and the model keeps a residual bend after vents that depends on the last excursion
+    (on two foreign plants that was most of the held-out error with nothing hidden). The
+    loop shape is otherwise free; the laws it can form are those with the wiping-out
+    property (Preisach-like).
 ``boucwen``
     A Bouc-Wen differential hysteresis on a smooth-knee pressure, ``dz = ṡ - b|ṡ||z|^(n-1)z -
     g ṡ|z|^n``, ``y = c0 + c1 s + c2 z + c3 s²``: smooth loops whose width saturates, with a
@@ -48,6 +55,12 @@ Step = Callable[[float], float]
 
 RATE_FILTER_S: Final = 0.02
 """Low-pass time constant of the rate estimate that rate-dependent thresholds use [s]."""
+
+TENSION_REF_BAR: Final = 1.5
+"""Pressure at which ``free_pi``'s play thresholds are their nominal ``r_i`` [bar] (mid-range)."""
+
+TENSION_SCALE_MAX: Final = 2.0
+"""Cap of the thresholds' growth with pressure (at twice the reference pressure)."""
 
 
 P = ParamSpec("P")
@@ -153,12 +166,16 @@ def _free_pi_kernel(  # noqa: PLR0917 - numba compiles positional arguments only
     beta_s: float,
     alpha: float,
     rate_hz: float,
+    tension_share: float,
+    tension_onset_bar: float,
     state: FloatArray,
     weights: FloatArray,
     features: FloatArray,
     out: FloatArray,
 ) -> None:  # pragma: no cover - compiled; exercised through FreePI
-    """Plays on ``max(x - d_j, 0)`` with thresholds ``r_i + beta |rate_j|``.
+    """Plays on ``max(x - d_j, 0)`` with thresholds ``r_i g(x) + beta |rate_j|``.
+
+    ``g(x) = 1 - share + share * min((x - onset)⁺ / (TENSION_REF_BAR - onset), TENSION_SCALE_MAX)``.
 
     ``state`` = (previous s_j, rate_j, started flag, plays j*I+i); ``features`` (n, J*I) is
     filled when it has rows, ``out`` (n,) with ``weights @ features + weights[-1]`` when
@@ -171,6 +188,11 @@ def _free_pi_kernel(  # noqa: PLR0917 - numba compiles positional arguments only
     total = weights.size > 0
     for k in range(x.size):
         acc = 0.0
+        tension = min(
+            max(x[k] - tension_onset_bar, 0.0) / (TENSION_REF_BAR - tension_onset_bar),
+            TENSION_SCALE_MAX,
+        )
+        scale = 1.0 - tension_share + tension_share * tension
         for j in range(n_off):
             s = x[k] - offsets[j]
             s = max(s, 0.0)
@@ -182,7 +204,7 @@ def _free_pi_kernel(  # noqa: PLR0917 - numba compiles positional arguments only
             speed = abs(rate)
             for i in range(n_thr):
                 at = plays + j * n_thr + i
-                th = thresholds[i] + beta_s * speed
+                th = thresholds[i] * scale + beta_s * speed
                 v = max(s - th, min(s + th, state[at]))
                 state[at] = v
                 if keep:
@@ -202,6 +224,11 @@ class FreePI(Core):
         n_offsets: Opening pressures from 0 to ``max_pressure_bar``.
         thresholds_bar: Play thresholds [bar] (0 is the plain shifted ramp).
         betas_s: Rate factors tried [s]; the best on training data is kept.
+        tension_shares: Shares γ of the thresholds that grow with the pressure (the
+            capstan effect; 0: fixed thresholds).
+        tension_onsets_bar: Pressures p_0 above which the thresholds grow [bar] (below
+            :data:`TENSION_REF_BAR`); with the shares, searched at the rate factor that is
+            best with fixed thresholds, then the rate factor again.
         ridge: Tikhonov weight relative to the design's mean square (keeps weights of
             columns the data barely excites small).
     """
@@ -209,7 +236,8 @@ class FreePI(Core):
     name = "free_pi"
     summary = (
         "Prandtl-Ishlinskii plays with free weights on a grid of thresholds and opening "
-        "pressures (knee, loop shape, saturation and asymmetry learnt)"
+        "pressures (knee, loop shape, saturation and asymmetry learnt; friction that grows "
+        "with the wire's tension)"
     )
     linear = True
 
@@ -220,6 +248,8 @@ class FreePI(Core):
         n_offsets: int = 14,
         thresholds_bar: Sequence[float] = (0.0, 0.03, 0.07, 0.12, 0.2, 0.3, 0.45, 0.65),
         betas_s: Sequence[float] = (0.0, 0.01, 0.02, 0.035, 0.05, 0.08),
+        tension_shares: Sequence[float] = (0.0, 0.5, 0.8, 0.95),
+        tension_onsets_bar: Sequence[float] = (0.0, 0.4, 0.8),
         ridge: float = 1e-6,
     ) -> None:
         if not (max_pressure_bar > 0.0 and 2 <= n_offsets <= 60):
@@ -228,23 +258,42 @@ class FreePI(Core):
             raise ParameterError("free_pi thresholds_bar must be a non-empty list of values >= 0")
         if not betas_s or min(betas_s) < 0.0:
             raise ParameterError("free_pi betas_s must be a non-empty list of values >= 0 [s]")
+        if not tension_shares or not all(0.0 <= g <= 1.0 for g in tension_shares):
+            raise ParameterError(
+                "free_pi tension_shares must be a non-empty list of values in [0, 1]"
+            )
+        if not tension_onsets_bar or not all(
+            0.0 <= p < TENSION_REF_BAR for p in tension_onsets_bar
+        ):
+            raise ParameterError(
+                "free_pi tension_onsets_bar must be a non-empty list of pressures in "
+                f"[0, {TENSION_REF_BAR}) bar"
+            )
         self.max_pressure_bar = float(max_pressure_bar)
         self.n_offsets = int(n_offsets)
         self.thresholds_bar = tuple(float(r) for r in thresholds_bar)
         self.betas_s = tuple(float(b) for b in betas_s)
+        self.tension_shares = tuple(float(g) for g in tension_shares)
+        self.tension_onsets_bar = tuple(float(p) for p in tension_onsets_bar)
         self.ridge = float(ridge)
         self._offsets = np.linspace(0.0, self.max_pressure_bar, self.n_offsets)
         self._thresholds = np.asarray(self.thresholds_bar, dtype=float)
         self.beta_s: float | None = None
+        self.tension_share = 0.0
+        """γ of the fitted core; a design before the fit uses it too (0: fixed thresholds)."""
+        self.tension_onset_bar = 0.0
+        """p_0 of the fitted core [bar]."""
         self.weights: FloatArray | None = None
 
     def settings(self) -> dict[str, Any]:
-        """The grid and the rate factors tried."""
+        """The grid, and the rate factors and tension shares tried."""
         return {
             "max_pressure_bar": self.max_pressure_bar,
             "n_offsets": self.n_offsets,
             "thresholds_bar": list(self.thresholds_bar),
             "betas_s": list(self.betas_s),
+            "tension_shares": list(self.tension_shares),
+            "tension_onsets_bar": list(self.tension_onsets_bar),
             "ridge": self.ridge,
         }
 
@@ -257,7 +306,11 @@ class FreePI(Core):
         return np.zeros(2 * self.n_offsets + 1 + self.n_offsets * len(self.thresholds_bar))
 
     def design(self, x: FloatArray, rate_hz: float, beta_s: float) -> FloatArray:
-        """The design matrix (n, columns): every play's output and a constant."""
+        """The design matrix (n, columns): every play's output and a constant.
+
+        The plays' thresholds grow with the pressure by the core's :attr:`tension_share`
+        above its :attr:`tension_onset_bar`.
+        """
         x = np.ascontiguousarray(x, dtype=np.float64)
         features = np.empty((x.size, self.n_columns))
         features[:, -1] = 1.0
@@ -268,6 +321,8 @@ class FreePI(Core):
             beta_s,
             _alpha(rate_hz),
             rate_hz,
+            self.tension_share,
+            self.tension_onset_bar,
             self._state(),
             np.empty(0),
             features[:, :-1],
@@ -305,15 +360,32 @@ class FreePI(Core):
     def fit(
         self, xs: Sequence[FloatArray], ys: Sequence[FloatArray], rate_hz: float, **kw: Any
     ) -> None:
-        """The best rate factor on the grid, each with weights by least squares."""
-        best: tuple[float, float, FloatArray] | None = None
-        for beta in self.betas_s:
-            designs = [self.design(x, rate_hz, beta) for x in xs]
-            w, loss = self.solve(designs, ys)
-            if best is None or loss < best[0]:
-                best = (loss, beta, w)
-        assert best is not None
-        self.beta_s, self.weights = best[1], best[2]
+        """The rate factor, tension share and onset on their grids; weights by least squares.
+
+        A coordinate search (the full grid would take 12 times as long): the rate factor with
+        fixed thresholds, then share and onset at that rate factor, then the rate factor
+        again at the best share and onset.
+        """
+        fits: dict[tuple[float, float, float], tuple[float, FloatArray]] = {}
+
+        def score(beta: float, share: float, onset: float) -> float:
+            key = (beta, share, onset) if share > 0.0 else (beta, 0.0, 0.0)
+            if key not in fits:
+                self.tension_share, self.tension_onset_bar = key[1], key[2]
+                w, loss = self.solve([self.design(x, rate_hz, beta) for x in xs], ys)
+                fits[key] = (loss, w)
+            return fits[key][0]
+
+        beta = min(self.betas_s, key=lambda b: score(b, 0.0, 0.0))
+        share, onset = min(
+            ((g, p) for g in self.tension_shares for p in self.tension_onsets_bar),
+            key=lambda gp: score(beta, *gp),
+        )
+        beta = min(self.betas_s, key=lambda b: score(b, share, onset))
+        if share == 0.0:
+            onset = 0.0
+        self.beta_s, self.tension_share, self.tension_onset_bar = beta, share, onset
+        self.weights = fits[(beta, share, onset)][1]
 
     def run(self, x: FloatArray, rate_hz: float) -> FloatArray:
         """Bend [deg] from rest."""
@@ -328,6 +400,8 @@ class FreePI(Core):
             self.beta_s,
             _alpha(rate_hz),
             rate_hz,
+            self.tension_share,
+            self.tension_onset_bar,
             self._state(),
             self.weights,
             np.empty((0, 0)),
@@ -340,7 +414,15 @@ class FreePI(Core):
         if self.weights is None or self.beta_s is None:
             raise ModelError("free_pi core is not fitted")
         state, sample, out = self._state(), np.zeros(1), np.zeros(1)
-        args = (self._offsets, self._thresholds, self.beta_s, _alpha(rate_hz), rate_hz)
+        args = (
+            self._offsets,
+            self._thresholds,
+            self.beta_s,
+            _alpha(rate_hz),
+            rate_hz,
+            self.tension_share,
+            self.tension_onset_bar,
+        )
         weights, empty = self.weights, np.empty((0, 0))
 
         def step(x: float) -> float:
@@ -351,16 +433,24 @@ class FreePI(Core):
         return step
 
     def values(self) -> dict[str, Any]:
-        """Rate factor and weights (the last weight is the constant)."""
+        """Rate factor, tension share and weights (the last weight is the constant)."""
         if self.weights is None:
             raise ModelError("free_pi core is not fitted")
-        return {"beta_s": self.beta_s, "weights": [float(w) for w in self.weights]}
+        return {
+            "beta_s": self.beta_s,
+            "tension_share": self.tension_share,
+            "tension_onset_bar": self.tension_onset_bar,
+            "weights": [float(w) for w in self.weights],
+        }
 
     def load_values(self, values: Mapping[str, Any]) -> None:
         """Weights and rate factor from a model file."""
         try:
             weights = np.asarray(values["weights"], dtype=float)
             beta = float(values["beta_s"])
+            # Files written before the thresholds could grow with the pressure: fixed ones.
+            share = float(values.get("tension_share", 0.0))
+            onset = float(values.get("tension_onset_bar", 0.0))
         except (KeyError, TypeError, ValueError) as exc:
             raise ModelError(f"free_pi core values are malformed: {exc}") from None
         if weights.shape != (self.n_columns,) or not np.all(np.isfinite(weights)):
@@ -369,7 +459,14 @@ class FreePI(Core):
             )
         if not (math.isfinite(beta) and beta >= 0.0):
             raise ModelError(f"free_pi beta_s = {beta!r} must be >= 0")
+        if not 0.0 <= share <= 1.0:
+            raise ModelError(f"free_pi tension_share = {share!r} must be in [0, 1]")
+        if not 0.0 <= onset < TENSION_REF_BAR:
+            raise ModelError(
+                f"free_pi tension_onset_bar = {onset!r} must be in [0, {TENSION_REF_BAR}) bar"
+            )
         self.weights, self.beta_s = weights, beta
+        self.tension_share, self.tension_onset_bar = share, onset
 
 
 # ------------------------------------------------------------------------------------------
