@@ -316,6 +316,19 @@ class FreePI(Core):
         features[:, -1] = 1.0
         _free_pi_kernel(
             x,
+            *self._kernel_args(rate_hz, beta_s),
+            self._state(),
+            np.empty(0),
+            features[:, :-1],
+            np.empty(0),
+        )
+        return features
+
+    def _kernel_args(
+        self, rate_hz: float, beta_s: float
+    ) -> tuple[FloatArray, FloatArray, float, float, float, float, float]:
+        """The kernel's structure arguments, between the input and the state."""
+        return (
             self._offsets,
             self._thresholds,
             beta_s,
@@ -323,12 +336,7 @@ class FreePI(Core):
             rate_hz,
             self.tension_share,
             self.tension_onset_bar,
-            self._state(),
-            np.empty(0),
-            features[:, :-1],
-            np.empty(0),
         )
-        return features
 
     @property
     def fitted(self) -> bool:
@@ -395,13 +403,7 @@ class FreePI(Core):
         out = np.empty(x.size)
         _free_pi_kernel(
             x,
-            self._offsets,
-            self._thresholds,
-            self.beta_s,
-            _alpha(rate_hz),
-            rate_hz,
-            self.tension_share,
-            self.tension_onset_bar,
+            *self._kernel_args(rate_hz, self.beta_s),
             self._state(),
             self.weights,
             np.empty((0, 0)),
@@ -414,15 +416,7 @@ class FreePI(Core):
         if self.weights is None or self.beta_s is None:
             raise ModelError("free_pi core is not fitted")
         state, sample, out = self._state(), np.zeros(1), np.zeros(1)
-        args = (
-            self._offsets,
-            self._thresholds,
-            self.beta_s,
-            _alpha(rate_hz),
-            rate_hz,
-            self.tension_share,
-            self.tension_onset_bar,
-        )
+        args = self._kernel_args(rate_hz, self.beta_s)
         weights, empty = self.weights, np.empty((0, 0))
 
         def step(x: float) -> float:
