@@ -23,6 +23,7 @@ with blocks only, no core change and no floors).
 
     .venv/bin/python bench/bench_lab_foreign.py --seeds 1 1001 --jobs 2
     .venv/bin/python bench/bench_lab_foreign.py --quick          # 4 cases, a smoke run
+    .venv/bin/python bench/bench_lab_foreign.py --merge A.json B.json   # one table of runs
 
 Writes ``bench/results/lab_foreign.json`` and prints the table that docs/lab.md shows.
 """
@@ -181,7 +182,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--out", type=Path, default=None)
+    parser.add_argument(
+        "--merge",
+        nargs="+",
+        type=Path,
+        default=None,
+        help="print the table and confusion of earlier runs' JSON files together; run nothing",
+    )
     args = parser.parse_args(argv)
+    if args.merge:
+        merged = [row for path in args.merge for row in json.loads(path.read_text())["rows"]]
+        print(table(merged))
+        print()
+        print(confusion(merged))
+        return 0
     jobs = [
         (p, kind, hidden, seed)
         for seed in args.seeds
