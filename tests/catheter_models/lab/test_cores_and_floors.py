@@ -132,7 +132,11 @@ def _diagnosis(rmse: float, noise: float, reference: float, *candidates: Candida
 
 def test_adequate_only_near_the_floors() -> None:
     assert _diagnosis(0.12, 0.05, 0.4).verdict == "adequate"  # within 3x the noise
-    assert _diagnosis(0.42, 0.05, 0.4).verdict == "adequate"  # no black box does better
+    assert "near the black box only" not in _diagnosis(0.12, 0.05, 0.4).text()
+    by_reference = _diagnosis(0.42, 0.05, 0.4)
+    assert by_reference.verdict == "adequate"  # no black box does better
+    assert "8.4 x" in by_reference.text()  # ...but it says how far from the noise it is
+    assert "near the black box only" in by_reference.text()
     far = _diagnosis(1.0, 0.05, 0.3)
     assert far.verdict == "unexplained"
     text = far.text()

@@ -138,9 +138,13 @@ class Floors:
     reference_deg: float
     reference: str = "filter-bank black box"
 
+    def near_noise(self, rmse_deg: float) -> bool:
+        """Whether ``rmse_deg`` is within :data:`NEAR_NOISE` times the noise floor."""
+        return math.isfinite(self.noise_deg) and rmse_deg <= NEAR_NOISE * self.noise_deg
+
     def near(self, rmse_deg: float) -> bool:
         """Whether ``rmse_deg`` is near the floors (see module)."""
-        if math.isfinite(self.noise_deg) and rmse_deg <= NEAR_NOISE * self.noise_deg:
+        if self.near_noise(rmse_deg):
             return True
         return math.isfinite(self.reference_deg) and rmse_deg <= NEAR_REFERENCE * (
             self.reference_deg
@@ -239,6 +243,13 @@ class Diagnosis:
                 f"  verdict: adequate: near the floors ({self.floors.text(self.rmse_test_deg)}),"
                 f" and no change removes {100 * MIN_REDUCTION:.0f} % of the held-out error"
             )
+            if not self.floors.near_noise(self.rmse_test_deg):
+                # Near the black box only: say plainly that the rest is far from the sensor's
+                # noise and only unlearnable from these data, not absent.
+                lines.append(
+                    "    (near the black box only: the rest is not learnable from these data; "
+                    "richer excitation may show more)"
+                )
         else:
             lines.append(
                 f"  verdict: unexplained: {self.floors.text(self.rmse_test_deg)}; no catalogue "
