@@ -71,6 +71,7 @@ def _vented_rms_deg(model: GreyBox, rec) -> float:
     return float(np.sqrt(np.mean(err**2)))
 
 
+@pytest.mark.slow
 def test_friction_that_grows_with_tension_lets_a_vented_tip_come_home() -> None:
     # The Bouc-Wen plant's friction level grows with the wire's load (its own law, not the
     # core's). Fixed thresholds leave a residual bend after every vent that depends on the
