@@ -174,6 +174,11 @@ def confusion(rows: Sequence[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def summary(rows: Sequence[dict[str, Any]]) -> str:
+    """The scored table and the confusion table, as printed."""
+    return f"{table(rows)}\n\n{confusion(rows)}"
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", nargs="+", type=int, default=[1, HELD_OUT_SEED0 + 1])
@@ -191,10 +196,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     if args.merge:
-        merged = [row for path in args.merge for row in json.loads(path.read_text())["rows"]]
-        print(table(merged))
-        print()
-        print(confusion(merged))
+        print(summary([row for path in args.merge for row in json.loads(path.read_text())["rows"]]))
         return 0
     jobs = [
         (p, kind, hidden, seed)
@@ -212,9 +214,7 @@ def main(argv: list[str] | None = None) -> int:
     with multiprocessing.get_context("spawn").Pool(args.jobs) as pool:
         rows = pool.map(run_case, jobs, chunksize=1)
     print()
-    print(table(rows))
-    print()
-    print(confusion(rows))
+    print(summary(rows))
     result = {
         "rows": rows,
         "table": table(rows),
