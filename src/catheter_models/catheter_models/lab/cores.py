@@ -370,7 +370,7 @@ class FreePI(Core):
     ) -> None:
         """The rate factor, tension share and onset on their grids; weights by least squares.
 
-        A coordinate search (the full grid would take 12 times as long): the rate factor with
+        A coordinate search (about 20 solves; the full grid takes 60): the rate factor with
         fixed thresholds, then share and onset at that rate factor, then the rate factor
         again at the best share and onset.
         """
