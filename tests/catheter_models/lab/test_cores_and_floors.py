@@ -17,6 +17,7 @@ from foreign_plants import PLANTS
 from foreign_plants.cases import draw_case, make_case
 
 from catheter_models.cli import main
+from catheter_models.lab.blocks import block
 from catheter_models.lab.cores import FreePI
 from catheter_models.lab.diagnose import Candidate, Diagnosis, Floors, diagnose
 from catheter_models.lab.floors import FilterBankReference, noise_std_deg
@@ -133,11 +134,13 @@ def _diagnosis(rmse: float, noise: float, reference: float, *candidates: Candida
 
 def test_adequate_only_near_the_floors() -> None:
     assert _diagnosis(0.12, 0.05, 0.4).verdict == "adequate"  # within 3x the noise
-    assert "near the black box only" not in _diagnosis(0.12, 0.05, 0.4).text()
+    assert "black box does no better" not in _diagnosis(0.12, 0.05, 0.4).text()
+    # A black box that does no better does not make an 8x-noise model adequate (issue 13's
+    # slow gain drift read "adequate" so): unexplained, saying that no black box learns it.
     by_reference = _diagnosis(0.42, 0.05, 0.4)
-    assert by_reference.verdict == "adequate"  # no black box does better
-    assert "8.4 x" in by_reference.text()  # ...but it says how far from the noise it is
-    assert "near the black box only" in by_reference.text()
+    assert by_reference.verdict == "unexplained"
+    assert "8.4 x" in by_reference.text()
+    assert "black box does no better" in by_reference.text()
     far = _diagnosis(1.0, 0.05, 0.3)
     assert far.verdict == "unexplained"
     text = far.text()
@@ -162,6 +165,41 @@ def test_a_change_that_does_not_earn_its_place_is_shown_but_not_named() -> None:
     d = _diagnosis(1.0, 0.05, 0.3, doubtful)
     assert d.verdict == "unexplained" and d.best is None
     assert "not counted: fraction at the end of its range" in d.text()
+
+
+@pytest.mark.parametrize(
+    ("effect", "unlike", "like"),
+    [
+        ("transport_delay", [0.005], [0.03]),  # 5 ms: the valve; 30 ms: a tube's dead time
+        ("pneumatic_lag", [0.004], [0.025]),
+        ("tip_dynamics", [3.0, 0.9, 0.0], [4.0, 0.12, 0.2]),  # a tip rings; 0.9 does not
+    ],
+)
+def test_a_block_at_values_its_effect_never_has_says_why(
+    effect: str, unlike: list[float], like: list[float]
+) -> None:
+    assert block(effect).unlike_effect(like) == []
+    (why,) = block(effect).unlike_effect(unlike)
+    assert ("valve" in why) if effect != "tip_dynamics" else ("does not ring" in why)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("hidden", "counted"), [("drift", True), ("gain_drift", False)])
+def test_a_drift_block_is_named_for_an_offset_drift_not_for_a_gain_drift(
+    hidden: str, counted: bool
+) -> None:
+    # Development seed 2 (held-out seeds are for the benchmark). A gain drift changes the bend
+    # where it bends and nothing at rest; the drift block half fits it overall, and must not
+    # be named for it.
+    case = draw_case(PLANTS["boucwen"], [hidden], 2)
+    model = GreyBox().fit([case.train], progress=False)
+    result = diagnose(model, [case.train], [case.test], effects=["drift"], cores=[])
+    print(result.text())
+    (drift,) = result.candidates
+    assert drift.measured_reduction > 0.05  # it removes error either way...
+    assert drift.significant is counted  # ...but only an offset shows with the muscle vented
+    if not counted:
+        assert "helps least where drift shows (vented" in result.text()
 
 
 @pytest.mark.slow

@@ -33,6 +33,16 @@ Side = Literal["input", "output"]
 Step = Callable[[float], float]
 """One sample in, one out: a block streamed (:meth:`Block.streamer`)."""
 
+SHORTEST_TUBE_S: Final = 0.010
+"""Shortest lag or dead time a tube and muscle give [s]. Rigs show 20-120 ms lags and 20-60 ms
+delays (docs/lab.md); a proportional valve's own response is a few ms, and the core's
+rate-dependent thresholds take that up. Half the rigs' lowest keeps real effects named."""
+
+MOST_TIP_DAMPING: Final = 0.5
+"""Largest damping ratio, with the tip straight, that still shows as a tip's ringing. Rigs show
+0.05-0.15; above 0.5 a step overshoots by under 16 %, below what the laser's noise and the
+hysteresis hide, and a second-order fit there is a smooth lag in disguise."""
+
 DEFAULT_CHAIN_EFFECTS: Final = ("play", "rate_dependence", "deadband", "asymmetry", "saturation")
 """The effects the thesis's DRDPI already carries (the default chain)."""
 
@@ -81,6 +91,17 @@ class Block(ABC):
     def excitation_problem(self, inputs: Sequence[FloatArray], rate_hz: float) -> str:
         """Why ``inputs`` (pressure, bar) cannot identify this block ('' if they can)."""
         return ""
+
+    def unlike_effect(self, values: Sequence[float]) -> list[str]:
+        """Why fitted ``values`` are not this effect's physics, though the block fits them.
+
+        A block's fit range is wide so that a search does not end at a wall; the effect it is
+        named after only looks one way on a rig. A block that removes error with values the
+        effect never has is standing in for something else (the valve's own response, a lag
+        on the sensor's side...), and naming the effect would mislead (empty: nothing
+        against it).
+        """
+        return []
 
     def apply_columns(
         self, m: FloatArray, rate_hz: float, values: Sequence[float], reference: FloatArray
@@ -171,6 +192,15 @@ class PneumaticLag(Block):
     primary = "time_constant_s"
     needs = "pressure changes of a few hundred ms or faster"
 
+    def unlike_effect(self, values: Sequence[float]) -> list[str]:
+        """A lag shorter than :data:`SHORTEST_TUBE_S` is the valve's own response."""
+        if values[0] < SHORTEST_TUBE_S:
+            return [
+                f"a {1e3 * values[0]:.1f} ms lag is shorter than any tube and muscle fill "
+                f"({1e3 * SHORTEST_TUBE_S:.0f} ms): the valve's own response"
+            ]
+        return []
+
     def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:
         """The muscle's pressure [bar]: the valve's through a first-order lag."""
         return _lowpass1(x, rate_hz, values[0])
@@ -188,6 +218,15 @@ class TransportDelay(Block):
     params = (BlockParam("delay_s", "s", 0.0, 0.2, 0.01, "dead time", 1e3, "ms"),)
     primary = "delay_s"
     needs = "pressure changes faster than the delay"
+
+    def unlike_effect(self, values: Sequence[float]) -> list[str]:
+        """A delay shorter than :data:`SHORTEST_TUBE_S` is the valve's own response."""
+        if values[0] < SHORTEST_TUBE_S:
+            return [
+                f"a {1e3 * values[0]:.1f} ms delay is shorter than any valve-to-tip dead time "
+                f"({1e3 * SHORTEST_TUBE_S:.0f} ms): the valve's own response"
+            ]
+        return []
 
     def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:
         """The pressure ``delay_s`` ago (the first sample before the recording began)."""
@@ -373,6 +412,15 @@ class TipDynamics(Block):
     )
     primary = "natural_frequency_hz"
     needs = "pressure steps or ramps faster than the tip's period (content above 1 Hz)"
+
+    def unlike_effect(self, values: Sequence[float]) -> list[str]:
+        """A tip that does not ring (damping above :data:`MOST_TIP_DAMPING`) is a lag."""
+        if values[1] > MOST_TIP_DAMPING:
+            return [
+                f"a damping ratio of {values[1]:.2f} does not ring (a tip rings: at most "
+                f"{MOST_TIP_DAMPING:g} straight): a smooth lag, on the sensor's side or the bend's"
+            ]
+        return []
 
     def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:
         """The bend [deg] through the tip's mass-spring, sub-stepped at 1 ms or finer."""
