@@ -74,6 +74,7 @@ def run_case(job: tuple[str, str, tuple[str, ...], int]) -> dict[str, Any]:
     drdpi = DRDPI().fit([case.train], progress=False)
     result = explain(drdpi, [case.train], [case.test])
     final = result.final
+    final_model = result.steps[-1].model
     added = [c for c in result.changes if not c.startswith("core:")]
     cores = [c for c in result.changes if c.startswith("core:")]
     noise_true = float(np.degrees(case.plant.noise_std_rad))
@@ -95,6 +96,15 @@ def run_case(job: tuple[str, str, tuple[str, ...], int]) -> dict[str, Any]:
         "noise_estimated_deg": final.floors.noise_deg,
         "reference_deg": final.floors.reference_deg,
         "first_verdict": result.steps[0].diagnosis.verdict,
+        # What the final model's blocks fitted, and each step's changes that removed error
+        # but were not counted (with why): the record a person checks a verdict against.
+        "blocks": dict(getattr(final_model, "block_values", dict)()),
+        "not_counted": [
+            {"step": i, "change": c.effect, "removes": c.measured_reduction, "why": c.doubts}
+            for i, step in enumerate(result.steps)
+            for c in step.diagnosis.candidates
+            if c.doubts
+        ],
         "seconds": time.perf_counter() - t0,
     }
     if kind == "single":
@@ -184,6 +194,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", nargs="+", type=int, default=[1, HELD_OUT_SEED0 + 1])
     parser.add_argument("--plants", nargs="+", default=list(PLANTS))
     parser.add_argument("--types", nargs="+", default=None, help="nothing single double outside")
+    parser.add_argument(
+        "--hidden", nargs="+", default=None, help="only cases hiding one of these effects"
+    )
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--out", type=Path, default=None)
@@ -204,6 +217,7 @@ def main(argv: list[str] | None = None) -> int:
         for kind, hidden in case_types()
         for p in args.plants
         if args.types is None or kind in args.types
+        if args.hidden is None or set(hidden) & set(args.hidden)
     ]
     if args.quick:
         jobs = [j for j in jobs if j[1] in ("nothing", "single")][:4]
