@@ -250,6 +250,7 @@ def test_core_and_explain_on_the_command_line(tmp_path: Path, capsys) -> None:
     assert (out_dir / "history.png").is_file() and (out_dir / "explanation.json").is_file()
     doc = json.loads((out_dir / "explanation.json").read_text())
     assert doc["changes"] == ["creep"]
+    assert all(step["seconds"] > 0 for step in doc["steps"])  # what bench_lab_foreign times
     assert (out_dir / "step1" / "manifest.json").is_file()
     history = [json.loads(line) for line in (out_dir / "history.jsonl").read_text().splitlines()]
     assert [h["added"] for h in history] == [None, "creep"]

@@ -4,12 +4,13 @@
 and ``catheter-lab add`` / ``core``, one step at a time: each step's diagnosis ranks every
 core change and every missing catalogue effect by the held-out error it removes; the best
 change that earns its place is made (its refitted model is the next version); the loop stops
-when no change does, with the last diagnosis's verdict: adequate (near the noise floor or the
-black-box reference) or unexplained (how far above them, where, and with which signature).
+when no change does, with the last diagnosis's verdict: adequate (within 3x the noise floor)
+or unexplained (how far above the floors, where, and with which signature).
 """
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -32,6 +33,8 @@ class Step:
     change: str | None
     """The change that made this version (None for the model the loop started from)."""
     diagnosis: Diagnosis
+    seconds: float = float("nan")
+    """Wall time of this step's diagnosis (every change refitted and scored) [s]."""
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready, without the model."""
@@ -42,6 +45,7 @@ class Step:
             "rmse_train_deg": d.rmse_train_deg,
             "rmse_test_deg": d.rmse_test_deg,
             "verdict": d.verdict,
+            "seconds": self.seconds,
         }
 
 
@@ -64,11 +68,13 @@ class Explanation:
     def text(self) -> str:
         """The table of steps, then the final diagnosis."""
         floors = self.final.floors
-        lines = [f"{'step':>4} {'train':>7} {'held-out':>8}  change              chain"]
+        lines = [
+            f"{'step':>4} {'train':>7} {'held-out':>8} {'diagnosed':>9}  change              chain"
+        ]
         for i, s in enumerate(self.steps):
             d = s.diagnosis
             lines.append(
-                f"{i:>4} {d.rmse_train_deg:7.3f} {d.rmse_test_deg:8.3f}  "
+                f"{i:>4} {d.rmse_train_deg:7.3f} {d.rmse_test_deg:8.3f} {s.seconds:8.0f}s  "
                 f"{(s.change or '-'):<19} {' -> '.join(d.chain)}"
             )
         lines.append(f"(RMSE in deg; {floors.text(self.final.rmse_test_deg)})")
@@ -98,8 +104,9 @@ def explain(
 
     ``on_step`` is called with each step as it is made (to save the version, say).
     """
+    t0 = time.perf_counter()
     diagnosis = diagnose(model, train, test, progress=progress)
-    steps = [Step(model, None, diagnosis)]
+    steps = [Step(model, None, diagnosis, time.perf_counter() - t0)]
     if on_step is not None:
         on_step(steps[-1])
     # A core, once left, does not come back: only untried cores compete in later steps.
@@ -110,6 +117,7 @@ def explain(
             break
         model = best.model
         tried_cores.add(_core_of(model))
+        t0 = time.perf_counter()
         diagnosis = diagnose(
             model,
             train,
@@ -117,7 +125,7 @@ def explain(
             cores=[c for c in CORES if c not in tried_cores],
             progress=progress,
         )
-        steps.append(Step(model, best.effect, diagnosis))
+        steps.append(Step(model, best.effect, diagnosis, time.perf_counter() - t0))
         if on_step is not None:
             on_step(steps[-1])
     return Explanation(steps)
