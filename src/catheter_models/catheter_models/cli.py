@@ -255,6 +255,26 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     return 0
 
 
+def _workers(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"--workers must be a whole number >= 1, not {text!r}")
+    return n
+
+
+def _workers_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--workers",
+        type=_workers,
+        default=None,
+        help="processes for the refits, which are independent (default: one per core; "
+        "1: this process only)",
+    )
+
+
 def _cmd_diagnose(args: argparse.Namespace) -> int:
     """Residual tests, then a refit per missing effect; ranked, or 'adequate'."""
     import json
@@ -274,6 +294,7 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
         effects=args.effect or None,
         cores=args.core,
         reference=not args.no_reference,
+        workers=args.workers,
     )
     print(result.text())
     if args.output is not None:
@@ -380,7 +401,9 @@ def _cmd_explain(args: argparse.Namespace) -> int:
             flush=True,
         )
 
-    result = explain(model, train, test, max_steps=args.max_steps, on_step=on_step)
+    result = explain(
+        model, train, test, max_steps=args.max_steps, on_step=on_step, workers=args.workers
+    )
     print()
     print(result.text())
     (args.output / "explanation.json").write_text(
@@ -553,6 +576,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="skip the black-box reference (the noise floor alone judges 'adequate')",
     )
     diag.add_argument("-o", "--output", type=Path, default=None, help="figures and JSON here")
+    _workers_argument(diag)
     diag.set_defaults(func=_cmd_diagnose)
 
     core = sub.add_parser("core", help="change a grey-box model's hysteresis core and refit")
@@ -570,6 +594,7 @@ def build_parser() -> argparse.ArgumentParser:
         "-o", "--output", type=Path, required=True, help="new directory: versions, figures"
     )
     expl.add_argument("--max-steps", type=int, default=4, help="changes at most (4)")
+    _workers_argument(expl)
     expl.set_defaults(func=_cmd_explain)
 
     add = sub.add_parser("add", help="add an effect block to a grey-box model and refit")

@@ -203,6 +203,21 @@ def test_a_drift_block_is_named_for_an_offset_drift_not_for_a_gain_drift(
 
 
 @pytest.mark.slow
+def test_refits_in_worker_processes_give_the_diagnosis_of_one_process(creep_case) -> None:
+    model = GreyBox().fit([creep_case.train], progress=False)
+    args = (model, [creep_case.train], [creep_case.test])
+    kwargs = {"effects": ["creep", "transport_delay"], "cores": ["boucwen"]}
+    one = diagnose(*args, **kwargs, workers=1)
+    two = diagnose(*args, **kwargs, workers=2)
+    assert [c.effect for c in two.candidates] == [c.effect for c in one.candidates]
+    for a, b in zip(one.candidates, two.candidates, strict=True):
+        assert b.rmse_test_deg == pytest.approx(a.rmse_test_deg, rel=1e-9)
+        assert b.value_si == pytest.approx(a.value_si, rel=1e-9, nan_ok=True)
+    assert two.floors.reference_deg == pytest.approx(one.floors.reference_deg, rel=1e-9)
+    assert two.verdict == one.verdict
+
+
+@pytest.mark.slow
 def test_on_a_foreign_plant_the_core_is_named_as_the_largest_miss() -> None:
     case = draw_case(PLANTS["boucwen"], [], 7)
     drdpi = GreyBox().fit([case.train], progress=False)

@@ -52,6 +52,14 @@ def test_refusals_are_one_line(argv: list[str], message: str, tmp_path: Path, ca
     assert len(refusals) == 1 and message in refusals[0], err
 
 
+@pytest.mark.parametrize("command", ["diagnose", "explain"])
+def test_a_worker_count_below_one_is_refused_by_name(command: str, capsys) -> None:
+    argv = [command, str(CLSTM), "--train", str(BAG), "--test", str(BAG), "--workers", "0"]
+    assert run([*argv, "-o", "unused"] if command == "explain" else argv) == 2
+    err = capsys.readouterr().err
+    assert "argument --workers: --workers must be a whole number >= 1, not '0'" in err
+
+
 def _write_with_rosbags(path: Path, rate_hz: float = 250.0) -> None:
     """A bag in the contract written by rosbags' own writer, not ours (as another lab's
     recorder would): absolute pressures, a JointState angle, stamps in the headers."""

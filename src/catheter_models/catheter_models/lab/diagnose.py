@@ -29,10 +29,13 @@ Learned models (LSTM, c-LSTM, SVR) get the floors and the residual tests: they h
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+import multiprocessing
+import os
+from collections.abc import Callable, Sequence
+from concurrent.futures import Executor, Future, ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Final
+from typing import Any, Final, ParamSpec, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -50,6 +53,8 @@ from catheter_models.models.evaluate import pooled_rmse
 from catheter_models.units import pa_to_bar, rad_to_deg
 
 BoolArray = npt.NDArray[np.bool_]
+P = ParamSpec("P")
+T = TypeVar("T")
 
 MIN_REDUCTION: Final = 0.10
 """Least share of the held-out RMSE a change must remove to be reported."""
@@ -429,6 +434,40 @@ def _pinned(model: GreyBox, effect: str) -> list[str]:
 
 
 @one_blas_thread
+def _fit_change(
+    model: GreyBox, change: str, train: Sequence[Recording], progress: bool = False
+) -> GreyBox:
+    """One change refitted (a worker's task): ``core:<name>`` or an effect's name."""
+    if change.startswith(f"{CORE_CHANGE}:"):
+        return model.with_core(change.split(":", 1)[1]).fit(train, progress=progress)
+    return model.with_effect(change).fit(train, progress=progress)
+
+
+@one_blas_thread
+def _reference_rmse_deg(train: Sequence[Recording], test: Sequence[Recording]) -> float:
+    return FilterBankReference().fit(train).rmse_deg(test)
+
+
+def default_workers() -> int:
+    """Processes for a diagnosis's refits: one per core the machine lets this process use."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
+def lab_pool(workers: int) -> ProcessPoolExecutor:
+    """A pool for :func:`diagnose`'s refits (spawned: numba and BLAS are not fork-safe)."""
+    return ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
+
+
+class _Serial(Executor):
+    """Runs each task at once, in this process (one worker, or a progress bar to show)."""
+
+    def submit(self, fn: Callable[P, T], /, *args: P.args, **kwargs: P.kwargs) -> Future[T]:
+        future: Future[T] = Future()
+        future.set_result(fn(*args, **kwargs))
+        return future
+
+
+@one_blas_thread
 def diagnose(
     model: Model,
     train: Sequence[Recording],
@@ -439,6 +478,8 @@ def diagnose(
     reference: bool = True,
     min_reduction: float = MIN_REDUCTION,
     progress: bool = False,
+    workers: int | None = None,
+    pool: Executor | None = None,
 ) -> Diagnosis:
     """Floors and residual tests on ``test``; for a grey box, a refit and score per change.
 
@@ -450,7 +491,11 @@ def diagnose(
         cores: Cores to try instead of the chain's (default: every other one; ``[]``: none).
         reference: Fit the black-box reference (seconds); without it, only the noise floor.
         min_reduction: Least share of the held-out error a change must remove.
-        progress: Show the core's search progress.
+        progress: Show the core's search progress (refits then run in this process).
+        workers: Processes for the refits, which are independent (default: one per core
+            this process may use; 1: in this process). Results do not depend on it.
+        pool: An executor to run the refits in, kept across calls (``explain`` passes one so
+            that its steps do not each start processes); overrides ``workers``.
 
     Raises:
         ParameterError: An unknown effect or core, or no training / held-out data.
@@ -462,12 +507,49 @@ def diagnose(
     if isinstance(model, GreyBox | DRDPI):
         chain = GreyBox.from_drdpi(model) if isinstance(model, DRDPI) else model
         wanted, other_cores = _changes(chain, effects, cores)
+    forward = model.direction == "forward"
+    tasks = len(other_cores) + len(wanted) + (1 if reference and forward else 0)
+    owned: ProcessPoolExecutor | None = None
+    if progress:
+        pool = _Serial()  # progress bars from several processes would garble each other
+    elif pool is None:
+        n = min(workers or default_workers(), tasks)
+        pool = owned = lab_pool(n) if n > 1 else None
+    try:
+        return _diagnose(
+            model,
+            train,
+            test,
+            wanted,
+            other_cores,
+            reference=reference,
+            min_reduction=min_reduction,
+            progress=progress,
+            pool=pool or _Serial(),
+        )
+    finally:
+        if owned is not None:
+            owned.shutdown()
+
+
+def _diagnose(
+    model: Model,
+    train: Sequence[Recording],
+    test: Sequence[Recording],
+    wanted: list[str],
+    other_cores: list[str],
+    *,
+    reference: bool,
+    min_reduction: float,
+    progress: bool,
+    pool: Executor,
+) -> Diagnosis:
+    """:func:`diagnose` once its changes are known and its pool chosen."""
     noise = noise_std_deg(test)
     forward = model.direction == "forward"
-    reference_deg = (
-        FilterBankReference().fit(train).rmse_deg(test) if reference and forward else math.nan
+    reference_future = (
+        pool.submit(_reference_rmse_deg, train, test) if reference and forward else None
     )
-    floors = Floors(noise, reference_deg)
     residual = _residuals(model, test)
     report = _residual_report(test, residual, model.direction)
     rmse_test = float(rad_to_deg(np.sqrt(np.mean(np.concatenate(residual) ** 2))))
@@ -477,6 +559,7 @@ def diagnose(
     if isinstance(model, DRDPI):
         model = GreyBox.from_drdpi(model)
     if not isinstance(model, GreyBox):
+        floors = Floors(noise, reference_future.result() if reference_future else math.nan)
         return Diagnosis(
             model_kind=model.kind,
             chain=[model.kind],
@@ -494,11 +577,23 @@ def diagnose(
                 "effect)"
             ),
         )
-    base_train = _rmse_deg(model, train)
     rate = train[0].rate_hz
     xs = [pa_to_bar(r.pressure_pa) for r in train]
     candidates: list[Candidate] = []
     untestable: dict[str, str] = {}
+    for e in wanted:
+        problem = block(e).excitation_problem(xs, rate)
+        if problem:
+            untestable[e] = problem
+    # Every refit is independent: all go to the pool at once, and are scored here in order.
+    fits: dict[str, Future[GreyBox]] = {}
+    for c in other_cores:
+        fits[c] = pool.submit(_fit_change, model, f"{CORE_CHANGE}:{c}", train, progress)
+    for e in wanted:
+        if e not in untestable:
+            fits[e] = pool.submit(_fit_change, model, e, train, progress)
+    floors = Floors(noise, reference_future.result() if reference_future else math.nan)
+    base_train = _rmse_deg(model, train)
 
     def scored(change: str, fitted: GreyBox) -> tuple[float, float, float, float]:
         rmse_train, rmse_test_new = _rmse_deg(fitted, train), _rmse_deg(fitted, test)
@@ -510,7 +605,7 @@ def diagnose(
         )
 
     for c in other_cores:
-        fitted = model.with_core(c).fit(train, progress=progress)
+        fitted = fits[c].result()
         rmse_train, rmse_test_new, expected, measured = scored(c, fitted)
         candidates.append(
             Candidate(
@@ -528,11 +623,9 @@ def diagnose(
             )
         )
     for e in wanted:
-        problem = block(e).excitation_problem(xs, rate)
-        if problem:
-            untestable[e] = problem
+        if e in untestable:
             continue
-        fitted = model.with_effect(e).fit(train, progress=progress)
+        fitted = fits[e].result()
         rmse_train, rmse_test_new, expected, measured = scored(e, fitted)
         spec = next(p for p in BLOCKS[e].params if p.name == BLOCKS[e].primary)
         value = fitted.block_values()[e][spec.name]

@@ -12,11 +12,12 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import Executor
 from dataclasses import dataclass
 from typing import Any
 
 from catheter_models.lab.cores import CORES
-from catheter_models.lab.diagnose import Diagnosis, diagnose
+from catheter_models.lab.diagnose import Diagnosis, default_workers, diagnose, lab_pool
 from catheter_models.models.base import Model, Recording
 from catheter_models.models.drdpi import DRDPI
 
@@ -99,13 +100,37 @@ def explain(
     max_steps: int = 4,
     progress: bool = False,
     on_step: Callable[[Step], None] | None = None,
+    workers: int | None = None,
 ) -> Explanation:
     """Diagnose and make the best change until none earns its place (at most ``max_steps``).
 
     ``on_step`` is called with each step as it is made (to save the version, say).
+    ``workers``: processes for each diagnosis's refits, started once for the whole loop
+    (default: one per core; 1: in this process).
     """
+    n = workers or default_workers()
+    pool = lab_pool(n) if n > 1 and not progress else None
+    try:
+        return _explain(
+            model, train, test, max_steps=max_steps, progress=progress, on_step=on_step, pool=pool
+        )
+    finally:
+        if pool is not None:
+            pool.shutdown()
+
+
+def _explain(
+    model: Model,
+    train: Sequence[Recording],
+    test: Sequence[Recording],
+    *,
+    max_steps: int,
+    progress: bool,
+    on_step: Callable[[Step], None] | None,
+    pool: Executor | None,
+) -> Explanation:
     t0 = time.perf_counter()
-    diagnosis = diagnose(model, train, test, progress=progress)
+    diagnosis = diagnose(model, train, test, progress=progress, workers=1, pool=pool)
     steps = [Step(model, None, diagnosis, time.perf_counter() - t0)]
     if on_step is not None:
         on_step(steps[-1])
@@ -124,6 +149,8 @@ def explain(
             test,
             cores=[c for c in CORES if c not in tried_cores],
             progress=progress,
+            workers=1,
+            pool=pool,
         )
         steps.append(Step(model, best.effect, diagnosis, time.perf_counter() - t0))
         if on_step is not None:
