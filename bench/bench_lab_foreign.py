@@ -22,8 +22,14 @@ held-out RMSE and what the lab said before (``--baseline``: the default chain's 
 with blocks only, no core change and no floors).
 
     .venv/bin/python bench/bench_lab_foreign.py --seeds 1 1001 --jobs 2
+    .venv/bin/python bench/bench_lab_foreign.py --seeds 1002 --jobs 1   # user-speed columns
     .venv/bin/python bench/bench_lab_foreign.py --quick          # 4 cases, a smoke run
     .venv/bin/python bench/bench_lab_foreign.py --merge A.json B.json   # one table of runs
+
+Speed (issue 13: one ``diagnose`` within 60 s, the whole loop within 5 minutes) is scored
+per case from each step's wall time. With ``--jobs 1`` a case runs alone and its refits
+spread over the cores, as a user's ``catheter-lab explain`` does; with ``--jobs 2`` two
+cases share the machine and each refits on one core, so its times are not the user's.
 
 Writes ``bench/results/lab_foreign.json`` and prints the table that docs/lab.md shows.
 """
@@ -49,6 +55,7 @@ from bench_plant import _machine  # noqa: E402
 from foreign_plants import CATALOGUE, OUTSIDE, PLANTS  # noqa: E402
 from foreign_plants.cases import HELD_OUT_SEED0, draw_case  # noqa: E402
 
+from catheter_models.lab.diagnose import default_workers  # noqa: E402
 from catheter_models.lab.explain import explain  # noqa: E402
 from catheter_models.models.drdpi import DRDPI  # noqa: E402
 from catheter_models.models.evaluate import pooled_rmse  # noqa: E402
@@ -113,6 +120,7 @@ def run_case(job: tuple[str, str, tuple[str, ...], int, int]) -> dict[str, Any]:
         "diagnose_s": [s.seconds for s in result.steps],
         "loop_s": sum(s.seconds for s in result.steps),
     }
+    row["workers"] = workers or default_workers()
     row["diagnose_within_60s"] = max(row["diagnose_s"]) <= 60.0
     row["loop_within_5min"] = row["loop_s"] <= 300.0
     if kind == "single":
@@ -194,6 +202,52 @@ def confusion(rows: Sequence[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+_PLANT_NAMES = {"maxwell_slip": "Maxwell-slip", "boucwen": "Bouc–Wen"}
+
+
+def _strength(row: dict[str, Any]) -> str:
+    parts = []
+    for name, params in zip(row["hidden"], row["strengths"], strict=True):
+        values = ", ".join(f"{k} {v:.3g}" for k, v in params.items())
+        parts.append(f"{name} ({values})")
+    return " + ".join(parts) or "nothing"
+
+
+def _mark(row: dict[str, Any]) -> str:
+    for key in ("named_first", "no_effect_named", "both_named", "unexplained_not_misnamed"):
+        if key in row:
+            return " ✓" if row[key] else " ✗"
+    return ""
+
+
+def _not_counted(row: dict[str, Any]) -> str:
+    # Each withheld name once (the step it was first withheld at), with its first reason.
+    seen: dict[str, str] = {}
+    for n in row.get("not_counted", []):
+        if n["change"] not in seen and n["why"]:
+            seen[n["change"]] = n["why"][0]
+    return "; ".join(f"{k}: {v}" for k, v in seen.items())
+
+
+def cases(rows: Sequence[dict[str, Any]]) -> str:
+    """One markdown row per case: what was hidden, what the loop did, the errors."""
+    lines = [
+        "| plant | hidden (strength) | the loop's changes | verdict | held-out RMSE "
+        "| noise | black box | diagnose (s) | withheld |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        diag = r.get("diagnose_s") or []
+        lines.append(
+            f"| {_PLANT_NAMES.get(r['plant'], r['plant'])} | {_strength(r)} "
+            f"| {' → '.join(r['changes']) or '(none)'}{_mark(r)} | {r['verdict']} "
+            f"| {r['drdpi_test_deg']:.3f} → {r['final_test_deg']:.3f}° "
+            f"| {r['noise_true_deg']:.3f}° | {r['reference_deg']:.3f}° "
+            f"| {', '.join(f'{s:.0f}' for s in diag) or '-'} | {_not_counted(r) or '-'} |"
+        )
+    return "\n".join(lines)
+
+
 def summary(rows: Sequence[dict[str, Any]]) -> str:
     """The scored table and the confusion table, as printed."""
     return f"{table(rows)}\n\n{confusion(rows)}"
@@ -217,9 +271,13 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         help="print the table and confusion of earlier runs' JSON files together; run nothing",
     )
+    parser.add_argument("--cases", action="store_true", help="with --merge: a row per case")
     args = parser.parse_args(argv)
     if args.merge:
-        print(summary([row for path in args.merge for row in json.loads(path.read_text())["rows"]]))
+        merged = [row for path in args.merge for row in json.loads(path.read_text())["rows"]]
+        print(summary(merged))
+        if args.cases:
+            print(f"\n{cases(merged)}")
         return 0
     jobs: list[tuple[str, str, tuple[str, ...], int]] = [
         (p, kind, hidden, seed)
