@@ -1,7 +1,8 @@
 """The floors a model's error is judged against: the sensor's noise and a black box.
 
-A model is *adequate* only when its held-out error is near what can be had at all. Two
-floors say how much that is, both measured on the data at hand:
+A model is *adequate* only when its held-out error is near the sensor's noise; the black box
+says whether what is left above the noise is learnable from the pressure at all. Both
+floors are measured on the data at hand:
 
 * **The noise floor**: the angle sensor's white noise, estimated from the measured bend
   itself. The bend of a catheter is smooth at the sensor's rate (its fastest dynamics,
