@@ -179,6 +179,16 @@ def _band_power_fraction(inputs: Sequence[FloatArray], rate_hz: float, above_hz:
     return high / total if total > 0.0 else 0.0
 
 
+def _valve_sized(time_s: float, what: str, of_a_rig: str) -> list[str]:
+    """Why a lag or delay of ``time_s`` is the valve's response (empty if it is not)."""
+    if time_s < SHORTEST_TUBE_S:
+        return [
+            f"a {1e3 * time_s:.1f} ms {what} is shorter than any {of_a_rig} "
+            f"({1e3 * SHORTEST_TUBE_S:.0f} ms): the valve's own response"
+        ]
+    return []
+
+
 class PneumaticLag(Block):
     """Tube compliance and air compressibility as a first-order lag on pressure."""
 
@@ -194,12 +204,7 @@ class PneumaticLag(Block):
 
     def unlike_effect(self, values: Sequence[float]) -> list[str]:
         """A lag shorter than :data:`SHORTEST_TUBE_S` is the valve's own response."""
-        if values[0] < SHORTEST_TUBE_S:
-            return [
-                f"a {1e3 * values[0]:.1f} ms lag is shorter than any tube and muscle fill "
-                f"({1e3 * SHORTEST_TUBE_S:.0f} ms): the valve's own response"
-            ]
-        return []
+        return _valve_sized(values[0], "lag", "tube and muscle fill")
 
     def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:
         """The muscle's pressure [bar]: the valve's through a first-order lag."""
@@ -221,12 +226,7 @@ class TransportDelay(Block):
 
     def unlike_effect(self, values: Sequence[float]) -> list[str]:
         """A delay shorter than :data:`SHORTEST_TUBE_S` is the valve's own response."""
-        if values[0] < SHORTEST_TUBE_S:
-            return [
-                f"a {1e3 * values[0]:.1f} ms delay is shorter than any valve-to-tip dead time "
-                f"({1e3 * SHORTEST_TUBE_S:.0f} ms): the valve's own response"
-            ]
-        return []
+        return _valve_sized(values[0], "delay", "valve-to-tip dead time")
 
     def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:
         """The pressure ``delay_s`` ago (the first sample before the recording began)."""
