@@ -10,9 +10,10 @@ lacks) with the training part to fit and the held-out part to score. Then the wh
 ``explain`` (diagnose, make the best change, again until nothing earns its place; target
 <= 5 minutes).
 
-Baseline: the same diagnosis done the obvious way, re-identifying every candidate chain
-from scratch (the DRDPI's global search again, then the polish) instead of warm-starting it
-from the fitted model. ``--no-baseline`` skips it.
+Baselines: the same diagnosis with its refits in one process (``workers=1``; ours spreads
+them over the cores), and done the obvious way, re-identifying every candidate chain from
+scratch (the DRDPI's global search again, then the polish) instead of warm-starting it from
+the fitted model. ``--no-baseline`` skips them.
 
     .venv/bin/python bench/bench_lab.py            # about a minute with the baseline
     .venv/bin/python bench/bench_lab.py --quick    # smoke run: smaller session, no baseline
@@ -111,6 +112,16 @@ def main(argv: list[str] | None = None) -> int:
         }
     }
     if not (args.quick or args.no_baseline):
+        # The same diagnosis with its refits in this one process (before they had workers).
+        t0 = time.perf_counter()
+        serial = diagnose(drdpi, train, test, workers=1)
+        serial_s = time.perf_counter() - t0
+        rows["baseline_one_process"] = {
+            "compare_s": compare_s,
+            "diagnose_s": serial_s,
+            "total_s": compare_s + serial_s,
+            "verdict": serial.verdict,
+        }
         scratch = _FromScratch.from_drdpi(drdpi)
         t0 = time.perf_counter()
         base = diagnose(scratch, train, test)
