@@ -19,7 +19,15 @@ from foreign_plants.cases import draw_case, make_case
 from catheter_models.cli import main
 from catheter_models.lab.blocks import block
 from catheter_models.lab.cores import FreePI
-from catheter_models.lab.diagnose import VENTED_BAR, Candidate, Diagnosis, Floors, diagnose
+from catheter_models.lab.diagnose import (
+    VENTED_BAR,
+    Candidate,
+    Diagnosis,
+    Floors,
+    default_workers,
+    diagnose,
+    lab_pool,
+)
 from catheter_models.lab.floors import FilterBankReference, noise_std_deg
 from catheter_models.lab.greybox import GreyBox
 from catheter_models.lab.residuals import residual_tests
@@ -201,6 +209,18 @@ def test_a_drift_block_is_named_for_an_offset_drift_not_for_a_gain_drift(
     assert drift.significant is counted  # ...but only an offset shows with the muscle vented
     if not counted:
         assert "helps least where drift shows (vented" in result.text()
+
+
+def test_workers_import_this_package_even_where_a_directory_of_its_name_comes_first(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Under pytest, tests/ (with tests/catheter_models/lab) is early on sys.path, and spawned
+    # workers inherit the path: every refit of the full suite once failed to unpickle there
+    # ("No module named 'catheter_models.lab.diagnose'"), while a test run alone passed.
+    (tmp_path / "catheter_models" / "lab").mkdir(parents=True)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with lab_pool(1) as pool:
+        assert pool.submit(default_workers).result(timeout=240) >= 1
 
 
 @pytest.mark.slow

@@ -453,9 +453,26 @@ def default_workers() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
+_PACKAGE_ROOT: Final = str(Path(__file__).resolve().parents[2])
+"""The directory this package is imported from (``src/catheter_models`` in a checkout)."""
+
+
 def lab_pool(workers: int) -> ProcessPoolExecutor:
-    """A pool for :func:`diagnose`'s refits (spawned: numba and BLAS are not fork-safe)."""
-    return ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
+    """A pool for :func:`diagnose`'s refits (spawned: numba and BLAS are not fork-safe).
+
+    A spawned worker starts with this process's ``sys.path`` and imports this package afresh
+    to unpickle its tasks. A directory of the same name earlier on that path shadows the
+    package there though not here, where it is already imported: pytest puts ``tests/``,
+    which holds ``tests/catheter_models``, first, and every refit failed in the full suite.
+    So each worker first puts the package's root at the front of its own path, with a
+    builtin initializer that needs no import.
+    """
+    return ProcessPoolExecutor(
+        workers,
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=exec,
+        initargs=(f"import sys; sys.path.insert(0, {_PACKAGE_ROOT!r})",),
+    )
 
 
 class _Serial(Executor):
