@@ -300,10 +300,15 @@ def test_killed_launcher_takes_its_graph_down_cleanly(
     with Probe(children.domain_id) as probe:
         commands = probe.subscribe(FluidPressure, PRESSURE_COMMAND.name, RECORD)
         measured = probe.subscribe(FluidPressure, PRESSURE_MEASURED.name, RECORD)
+        # Both subscriptions must have matched: under load the probe's command subscription
+        # once matched after its measured one, and the run was judged with no command seen.
         assert probe.spin_until(
-            lambda: len(measured) > 25 and gauge_pa(measured[-25:]).mean() > 1.5e5, 60.0
+            lambda: (
+                bool(commands) and len(measured) > 25 and gauge_pa(measured[-25:]).mean() > 1.5e5
+            ),
+            60.0,
         ), children.all_logs()
-        # The bag must hold everything from the first command on (the run's start).
+        # The bag must hold everything from the first command the probe saw on.
         t_start_wall = time.time() - (time.monotonic() - commands[0].mono_s)
         nodes = _children_of(launcher.pid)
         assert {"sim_hardware_node", "compensator_node", "recorder_node"} <= set(nodes.values())
