@@ -31,8 +31,9 @@ from __future__ import annotations
 import math
 import multiprocessing
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, Future, ProcessPoolExecutor
+from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final, ParamSpec, TypeVar
@@ -484,6 +485,25 @@ class _Serial(Executor):
         return future
 
 
+@contextmanager
+def refit_executor(
+    workers: int | None, *, progress: bool = False, tasks: int | None = None
+) -> Iterator[Executor]:
+    """Where refits run; the one place :func:`diagnose` and ``explain`` choose it.
+
+    Worker processes (``workers``, default one per core, at most ``tasks``), or this process
+    for one worker or a progress bar (bars from several processes would garble each other).
+    """
+    n = workers or default_workers()
+    if tasks is not None:
+        n = min(n, tasks)
+    if progress or n <= 1:
+        yield _Serial()
+        return
+    with lab_pool(n) as pool:
+        yield pool
+
+
 @one_blas_thread
 def diagnose(
     model: Model,
@@ -526,13 +546,11 @@ def diagnose(
         wanted, other_cores = _changes(chain, effects, cores)
     forward = model.direction == "forward"
     tasks = len(other_cores) + len(wanted) + (1 if reference and forward else 0)
-    owned: ProcessPoolExecutor | None = None
-    if progress:
-        pool = _Serial()  # progress bars from several processes would garble each other
-    elif pool is None:
-        n = min(workers or default_workers(), tasks)
-        pool = owned = lab_pool(n) if n > 1 else None
-    try:
+    with (
+        refit_executor(workers, progress=progress, tasks=tasks)
+        if pool is None or progress
+        else nullcontext(pool)
+    ) as chosen:
         return _diagnose(
             model,
             train,
@@ -542,11 +560,8 @@ def diagnose(
             reference=reference,
             min_reduction=min_reduction,
             progress=progress,
-            pool=pool or _Serial(),
+            pool=chosen,
         )
-    finally:
-        if owned is not None:
-            owned.shutdown()
 
 
 def _diagnose(

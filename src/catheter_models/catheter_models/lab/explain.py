@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from catheter_models.lab.cores import CORES
-from catheter_models.lab.diagnose import Diagnosis, default_workers, diagnose, lab_pool
+from catheter_models.lab.diagnose import Diagnosis, diagnose, refit_executor
 from catheter_models.models.base import Model, Recording
 from catheter_models.models.drdpi import DRDPI
 
@@ -108,15 +108,10 @@ def explain(
     ``workers``: processes for each diagnosis's refits, started once for the whole loop
     (default: one per core; 1: in this process).
     """
-    n = workers or default_workers()
-    pool = lab_pool(n) if n > 1 and not progress else None
-    try:
+    with refit_executor(workers, progress=progress) as pool:
         return _explain(
             model, train, test, max_steps=max_steps, progress=progress, on_step=on_step, pool=pool
         )
-    finally:
-        if pool is not None:
-            pool.shutdown()
 
 
 def _explain(
@@ -127,10 +122,10 @@ def _explain(
     max_steps: int,
     progress: bool,
     on_step: Callable[[Step], None] | None,
-    pool: Executor | None,
+    pool: Executor,
 ) -> Explanation:
     t0 = time.perf_counter()
-    diagnosis = diagnose(model, train, test, progress=progress, workers=1, pool=pool)
+    diagnosis = diagnose(model, train, test, progress=progress, pool=pool)
     steps = [Step(model, None, diagnosis, time.perf_counter() - t0)]
     if on_step is not None:
         on_step(steps[-1])
@@ -149,7 +144,6 @@ def _explain(
             test,
             cores=[c for c in CORES if c not in tried_cores],
             progress=progress,
-            workers=1,
             pool=pool,
         )
         steps.append(Step(model, best.effect, diagnosis, time.perf_counter() - t0))
