@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
 from pathlib import Path
 
@@ -24,9 +25,11 @@ from catheter_models.lab.diagnose import (
     Candidate,
     Diagnosis,
     Floors,
+    RefitWorkerError,
     default_workers,
     diagnose,
     lab_pool,
+    refit_executor,
 )
 from catheter_models.lab.floors import FilterBankReference, noise_std_deg
 from catheter_models.lab.greybox import GreyBox
@@ -221,6 +224,13 @@ def test_workers_import_this_package_even_where_a_directory_of_its_name_comes_fi
     monkeypatch.syspath_prepend(str(tmp_path))
     with lab_pool(1) as pool:
         assert pool.submit(default_workers).result(timeout=240) >= 1
+
+
+def test_a_worker_that_dies_is_reported_with_a_way_out() -> None:
+    # A worker killed (the kernel's OOM killer, a signal) breaks the whole pool; the bare
+    # BrokenProcessPool names neither cause nor remedy.
+    with pytest.raises(RefitWorkerError, match=r"--workers 1"), refit_executor(2) as pool:
+        pool.submit(os._exit, 3).result(timeout=240)
 
 
 @pytest.mark.slow

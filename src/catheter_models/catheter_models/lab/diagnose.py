@@ -33,6 +33,7 @@ import multiprocessing
 import os
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -41,7 +42,7 @@ from typing import Any, Final, ParamSpec, TypeVar
 import numpy as np
 import numpy.typing as npt
 
-from catheter_models.errors import ParameterError
+from catheter_models.errors import CatheterError, ParameterError
 from catheter_models.lab.blocks import BLOCKS, block
 from catheter_models.lab.cores import CORES, one_blas_thread
 from catheter_models.lab.floors import FilterBankReference, noise_std_deg
@@ -454,6 +455,10 @@ def default_workers() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
+class RefitWorkerError(CatheterError):
+    """A worker process died while refitting (killed, most often for memory)."""
+
+
 _PACKAGE_ROOT: Final = str(Path(__file__).resolve().parents[2])
 """The directory this package is imported from (``src/catheter_models`` in a checkout)."""
 
@@ -501,7 +506,15 @@ def refit_executor(
         yield _Serial()
         return
     with lab_pool(n) as pool:
-        yield pool
+        try:
+            yield pool
+        except BrokenProcessPool as exc:
+            # The pool's own message names no cause and no way out; a person needs both.
+            raise RefitWorkerError(
+                f"a refit's worker process stopped before it answered ({exc}): it was killed, "
+                "most often for memory; run again with --workers 1 (refits in this process) "
+                "or with more memory free"
+            ) from exc
 
 
 @one_blas_thread
@@ -536,6 +549,7 @@ def diagnose(
 
     Raises:
         ParameterError: An unknown effect or core, or no training / held-out data.
+        RefitWorkerError: A worker process died before it answered.
     """
     if not train or not test:
         raise ParameterError("diagnose needs training recordings and held-out test recordings")
