@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from catheter_models.errors import ParameterError
-from catheter_models.lab.blocks import BLOCKS, block, ordered
+from catheter_models.lab.blocks import BLOCKS, FORMS, block, ordered
 from catheter_models.lab.cores import make_core
 from catheter_models.lab.greybox import GreyBox
 from catheter_models.models import load_model
@@ -151,10 +151,11 @@ STREAM_VALUES = {
     "creep": [0.3, 1.2],
     "tip_dynamics": [6.3, 0.07, 2.0],
     "drift": [math.radians(5.0) / 60.0],
+    "output_lag": [0.05],
 }
 
 
-@pytest.mark.parametrize("effect", list(BLOCKS))
+@pytest.mark.parametrize("effect", list(FORMS))
 def test_each_block_streams_what_it_applies(effect: str) -> None:
     rng = np.random.default_rng(3)
     x = np.cumsum(rng.normal(0.0, 0.3, 1500)) + 5.0  # a rough signal that starts off rest
@@ -178,7 +179,7 @@ def test_a_greybox_with_every_block_streams_its_prediction(core: str, drdpi_and_
             [rad_to_deg(r.angle_rad) for r in recs],
             RATE_HZ,
         )
-    model = GreyBox(effects=list(BLOCKS), core=core)
+    model = GreyBox(effects=list(FORMS), core=core)
     model._set(fitted, STREAM_VALUES, RATE_HZ)  # every block, at off-grid values
     pressure_pa = recs[1].pressure_pa[:1500]
     stream = model.stream()

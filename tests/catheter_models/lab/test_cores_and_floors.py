@@ -205,13 +205,39 @@ def test_a_drift_block_is_named_for_an_offset_drift_not_for_a_gain_drift(
     # be named for it.
     case = draw_case(PLANTS["boucwen"], [hidden], 2)
     model = GreyBox().fit([case.train], progress=False)
-    result = diagnose(model, [case.train], [case.test], effects=["drift"], cores=[])
+    result = diagnose(
+        model, [case.train], [case.test], effects=["drift"], cores=[], reference=False
+    )
     print(result.text())
     (drift,) = result.candidates
     assert drift.measured_reduction > 0.05  # it removes error either way...
     assert drift.significant is counted  # ...but only an offset shows with the muscle vented
     if not counted:
         assert "helps least where drift shows (vented" in result.text()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("plant", "hidden", "seed", "named"),
+    [("maxwell_slip", "sensor_lag", 12, False), ("boucwen", "pneumatic_lag", 11, True)],
+)
+def test_a_lag_is_named_pneumatic_only_where_it_is_before_the_core(
+    plant: str, hidden: str, seed: int, named: bool
+) -> None:
+    # Development seeds. A lag in the laser's filter (outside the catalogue) removes much of
+    # the same error as one in the tube; only the side of the hysteresis tells them apart.
+    case = draw_case(PLANTS[plant], [hidden], seed)
+    model = GreyBox(core="free_pi").fit([case.train], progress=False)
+    result = diagnose(
+        model, [case.train], [case.test], effects=["pneumatic_lag"], cores=[], reference=False
+    )
+    print(result.text())
+    (lag,) = result.candidates
+    assert lag.measured_reduction > 0.3  # it removes error either way...
+    assert lag.significant is named  # ...but is named only where it sits
+    if not named:
+        assert result.verdict == "unexplained"
+        assert "output_lag (on the core's output side) fits better" in result.text()
 
 
 def test_workers_import_this_package_even_where_a_directory_of_its_name_comes_first(
@@ -237,14 +263,14 @@ def test_a_worker_that_dies_is_reported_with_a_way_out() -> None:
 def test_refits_in_worker_processes_give_the_diagnosis_of_one_process(creep_case) -> None:
     model = GreyBox().fit([creep_case.train], progress=False)
     args = (model, [creep_case.train], [creep_case.test])
-    kwargs = {"effects": ["creep", "transport_delay"], "cores": ["boucwen"]}
+    # Two refits (one per worker) and no black box: what differs is only where they run.
+    kwargs = {"effects": ["creep", "transport_delay"], "cores": [], "reference": False}
     one = diagnose(*args, **kwargs, workers=1)
     two = diagnose(*args, **kwargs, workers=2)
     assert [c.effect for c in two.candidates] == [c.effect for c in one.candidates]
     for a, b in zip(one.candidates, two.candidates, strict=True):
         assert b.rmse_test_deg == pytest.approx(a.rmse_test_deg, rel=1e-9)
         assert b.value_si == pytest.approx(a.value_si, rel=1e-9, nan_ok=True)
-    assert two.floors.reference_deg == pytest.approx(one.floors.reference_deg, rel=1e-9)
     assert two.verdict == one.verdict
 
 

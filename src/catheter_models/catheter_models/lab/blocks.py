@@ -79,6 +79,10 @@ class Block(ABC):
     """The parameter the diagnosis reports (a time constant, a delay, a frequency...)."""
     needs: ClassVar[str]
     """What excitation identifies it, for the 'too little excitation' message."""
+    rival: ClassVar[str] = ""
+    """A form outside the catalogue (:data:`CHECKS`) that gives the same signature from the
+    core's other side. Where it fits the held-out data clearly better, the effect is not
+    where this block puts it, and the diagnosis does not name it ('': no rival)."""
 
     @abstractmethod
     def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:
@@ -201,6 +205,9 @@ class PneumaticLag(Block):
     )
     primary = "time_constant_s"
     needs = "pressure changes of a few hundred ms or faster"
+    # Before a hysteresis a lag shifts each reversal; after it, it rounds the reversal's
+    # corner. Both remove much of the same error, so only the better fit tells the side.
+    rival = "output_lag"
 
     def unlike_effect(self, values: Sequence[float]) -> list[str]:
         """A lag shorter than :data:`SHORTEST_TUBE_S` is the valve's own response."""
@@ -531,10 +538,52 @@ class Drift(Block):
         return ""
 
 
+class OutputLag(Block):
+    """A first-order lag on the bend, after the core: not in the catalogue.
+
+    The sensor's own filter, or a bend that follows its muscle slowly, looks like this. The
+    diagnosis fits it only as the rival of :class:`PneumaticLag` (which side of the
+    hysteresis the lag is on); a person may add it to a chain by hand.
+    """
+
+    effect = "output_lag"
+    side: ClassVar[Side] = "output"
+    params = (
+        BlockParam("time_constant_s", "s", 0.002, 0.5, 0.03, "lag of bend behind core", 1e3, "ms"),
+    )
+    primary = "time_constant_s"
+    needs = "pressure changes of a few hundred ms or faster"
+
+    def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:
+        """The bend [deg] through a first-order lag."""
+        return _lowpass1(x, rate_hz, values[0])
+
+    def apply_columns(
+        self, m: FloatArray, rate_hz: float, values: Sequence[float], reference: FloatArray
+    ) -> FloatArray:
+        """A lag is linear: every column at once."""
+        a = math.exp(-1.0 / (rate_hz * values[0]))
+        lag, _ = sps.lfilter([1.0 - a], [1.0, -a], m, axis=0, zi=a * m[:1, :])
+        out: FloatArray = np.asarray(lag, dtype=float)
+        return out
+
+    def streamer(self, rate_hz: float, values: Sequence[float]) -> Step:
+        """The lag, one sample at a time."""
+        return _Lowpass1Stream(rate_hz, values[0]).step
+
+
 BLOCKS: Final[Mapping[str, type[Block]]] = {
     b.effect: b for b in (TransportDelay, PneumaticLag, Creep, TipDynamics, Drift)
 }
-"""Blocks by effect name, in chain order within each side."""
+"""The catalogue: blocks by effect name, in chain order within each side. A diagnosis tries
+and names these."""
+
+CHECKS: Final[Mapping[str, type[Block]]] = {b.effect: b for b in (OutputLag,)}
+"""Forms outside the catalogue: a diagnosis fits them only as a block's :attr:`Block.rival`,
+and never names them."""
+
+FORMS: Final[Mapping[str, type[Block]]] = {**BLOCKS, **CHECKS}
+"""Every block a grey-box chain can hold, in chain order within each side."""
 
 
 def block(effect: str) -> Block:
@@ -542,12 +591,12 @@ def block(effect: str) -> Block:
     if effect in DEFAULT_CHAIN_EFFECTS:
         raise ParameterError(
             f"{effect!r} is part of the default chain (the DRDPI) already; blocks that can be "
-            f"added: {', '.join(BLOCKS)}"
+            f"added: {', '.join(FORMS)}"
         )
-    cls = BLOCKS.get(effect)
+    cls = FORMS.get(effect)
     if cls is None:
         raise ParameterError(
-            f"unknown effect {effect!r}; blocks that can be added: {', '.join(BLOCKS)} "
+            f"unknown effect {effect!r}; blocks that can be added: {', '.join(FORMS)} "
             f"(the DRDPI carries {', '.join(DEFAULT_CHAIN_EFFECTS)})"
         )
     return cls()
@@ -559,4 +608,4 @@ def ordered(effects: Sequence[str]) -> tuple[str, ...]:
         block(e)
     if len(set(effects)) != len(effects):
         raise ParameterError(f"an effect is listed twice: {list(effects)}")
-    return tuple(e for e in BLOCKS if e in effects)
+    return tuple(e for e in FORMS if e in effects)

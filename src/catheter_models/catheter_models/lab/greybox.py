@@ -40,7 +40,7 @@ import numpy.typing as npt
 from scipy import optimize
 
 from catheter_models.errors import ParameterError
-from catheter_models.lab.blocks import BLOCKS, Block, BlockParam, block, ordered
+from catheter_models.lab.blocks import FORMS, Block, BlockParam, block, ordered
 from catheter_models.lab.cores import CORES, Core, DRDPICore, FreePI, make_core, one_blas_thread
 from catheter_models.model_dir import Manifest
 from catheter_models.models.base import (
@@ -116,8 +116,9 @@ class GreyBox(Model):
     blocks.
 
     Args:
-        effects: Catalogue effects to add to the core (:data:`~.blocks.BLOCKS`); their
-            order in the chain is fixed by physics (input side, then output side).
+        effects: Blocks to add to the core (:data:`~.blocks.FORMS`: the catalogue's and
+            its checks'); their order in the chain is fixed by physics (input side, then
+            output side).
         core: The hysteresis law (:data:`~.cores.CORES`): ``drdpi`` (the thesis's, default),
             ``free_pi``, ``boucwen``.
         core_settings: The core's structure (see its class), e.g. ``{"n_offsets": 10}``.
@@ -179,8 +180,8 @@ class GreyBox(Model):
     @property
     def chain(self) -> tuple[str, ...]:
         """The chain as a person reads it, input to output."""
-        inputs = [e for e in self.effects if BLOCKS[e].side == "input"]
-        outputs = [e for e in self.effects if BLOCKS[e].side == "output"]
+        inputs = [e for e in self.effects if FORMS[e].side == "input"]
+        outputs = [e for e in self.effects if FORMS[e].side == "output"]
         return (*inputs, self.core_name, *outputs)
 
     def _fitted_now(self) -> bool:
@@ -237,7 +238,7 @@ class GreyBox(Model):
         """Each block's identified parameters by name (SI)."""
         self._fitted()
         return {
-            e: {p.name: v for p, v in zip(BLOCKS[e].params, self.blocks_[e], strict=True)}
+            e: {p.name: v for p, v in zip(FORMS[e].params, self.blocks_[e], strict=True)}
             for e in self.effects
         }
 
@@ -246,7 +247,7 @@ class GreyBox(Model):
         self, x_bar: FloatArray, rate_hz: float, blocks: Mapping[str, Sequence[float]]
     ) -> FloatArray:
         for e in self.effects:
-            if BLOCKS[e].side == "input":
+            if FORMS[e].side == "input":
                 x_bar = self._blocks[e].apply(x_bar, rate_hz, blocks[e])
         return x_bar
 
@@ -254,7 +255,7 @@ class GreyBox(Model):
         self, y: FloatArray, rate_hz: float, blocks: Mapping[str, Sequence[float]]
     ) -> FloatArray:
         for e in self.effects:
-            if BLOCKS[e].side == "output":
+            if FORMS[e].side == "output":
                 y = self._blocks[e].apply(y, rate_hz, blocks[e])
         return y
 
@@ -357,7 +358,7 @@ class GreyBox(Model):
                 "values": self.core_.values(),
             },
             "blocks": self.block_values(),
-            "units": {e: {p.name: p.unit for p in BLOCKS[e].params} for e in self.effects},
+            "units": {e: {p.name: p.unit for p in FORMS[e].params} for e in self.effects},
         }
         return {GREYBOX_FILE: (json.dumps(doc, indent=2) + "\n").encode()}
 
@@ -404,7 +405,7 @@ class _Fitter:
     ) -> None:
         self.model, self.core, self.xs, self.ys, self.rate = model, core, xs, ys, rate
         self.weights = [1.0 / math.sqrt(x.size) for x in xs]
-        self.specs = [(e, p) for e in model.effects for p in BLOCKS[e].params]
+        self.specs = [(e, p) for e in model.effects for p in FORMS[e].params]
 
     def pack(self, blocks: Mapping[str, Sequence[float]]) -> FloatArray:
         return np.array([v for e in self.model.effects for v in blocks[e]], dtype=float)
@@ -439,8 +440,8 @@ class _Fitter:
         for e in new:
             scored: list[tuple[float, dict[str, list[float]]]] = []
             base = starts[0]
-            n_params = len(BLOCKS[e].params)
-            for combo in itertools.product(*(_grid(p, n_params) for p in BLOCKS[e].params)):
+            n_params = len(FORMS[e].params)
+            for combo in itertools.product(*(_grid(p, n_params) for p in FORMS[e].params)):
                 trial = {**base, e: [float(c) for c in combo]}
                 scored.append((self.loss(trial), trial))
             scored.sort(key=lambda t: t[0])
@@ -532,7 +533,7 @@ class _LinearFitter(_Fitter):
         The core's rate-dependent thresholds may have stood in for a lag or a delay, so a
         search with a new input block also tries the core without them.
         """
-        if any(BLOCKS[e].side == "input" for e in new):
+        if any(FORMS[e].side == "input" for e in new):
             self.betas = {self.free.beta_s or 0.0, 0.0}
         self.reduce(blocks)
 
@@ -556,7 +557,7 @@ class _LinearFitter(_Fitter):
     def _design(self, blocks: Mapping[str, Sequence[float]], beta: float) -> list[FloatArray]:
         """Per recording: the core's plays on the input blocks' output (a small cache)."""
         model = self.model
-        key = (beta, *(v for e in model.effects if BLOCKS[e].side == "input" for v in blocks[e]))
+        key = (beta, *(v for e in model.effects if FORMS[e].side == "input" for v in blocks[e]))
         if key in self._designs:
             self._designs.move_to_end(key)
             return self._designs[key]
@@ -579,7 +580,7 @@ class _LinearFitter(_Fitter):
         solves, each scheduling the tip by the previous weights' bend (the grid takes one).
         """
         model = self.model
-        outputs = [e for e in model.effects if BLOCKS[e].side == "output"]
+        outputs = [e for e in model.effects if FORMS[e].side == "output"]
         w = self.free.weights
         if w is not None and self.basis is not None:
             w = self.basis.T @ w
@@ -673,14 +674,12 @@ class _GreyBoxStream:
         m = self._model
         rate = m.rate_hz_
         self._inputs = [
-            m._blocks[e].streamer(rate, m.blocks_[e])
-            for e in m.effects
-            if BLOCKS[e].side == "input"
+            m._blocks[e].streamer(rate, m.blocks_[e]) for e in m.effects if FORMS[e].side == "input"
         ]
         self._outputs = [
             m._blocks[e].streamer(rate, m.blocks_[e])
             for e in m.effects
-            if BLOCKS[e].side == "output"
+            if FORMS[e].side == "output"
         ]
         self._core = m.core_.streamer(rate)
 
