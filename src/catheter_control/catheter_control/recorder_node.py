@@ -100,7 +100,10 @@ class RecorderNode(Node):
         )
         self.counts: dict[str, int] = {}
         self.gaps: dict[str, StreamGaps] = {}
-        self._queue: deque[tuple[str, bytes, int]] = deque()
+        self._queue: deque[tuple[str, bytes, int, int]] = deque()
+        """Messages for the writer: topic, serialised message, receive time [ns], arrival."""
+        self._arrived = 0
+        """Messages taken in so far (numbered in arrival order; one intake thread)."""
         self.queue_max = 0
         """The deepest the intake queue has been (messages waiting for the writer thread)."""
         self.max_queue = int(
@@ -122,7 +125,9 @@ class RecorderNode(Node):
         """Per topic: messages received but not written: dropped at intake (queue full) or
         left unwritten at shutdown. Their stamps still reach the gap count, so a sample is
         counted lost once: as a gap if it never arrived, as dropped if it did."""
-        self._dropped_stamps: deque[tuple[str, int | None]] = deque()
+        self._dropped_stamps: deque[tuple[str, int | None, int]] = deque()
+        """Dropped at intake: topic, header stamp, arrival number. The gap count takes them
+        in arrival order among the written ones: a stamp noted late reads as a gap first."""
         self._intake_open = True
         self._subscriptions_by_topic: dict[str, Subscription[Any]] = {}
         self._specs: dict[str, TopicSpec] = {}
@@ -178,15 +183,17 @@ class RecorderNode(Node):
         def on_message(data: bytes) -> None:
             if not self._intake_open:
                 return  # arrived after the stop: not part of the recording
+            arrival = self._arrived
+            self._arrived = arrival + 1
             if len(queue) >= self.max_queue:
                 # The writer is far behind: drop and count, never block and never grow
                 # without bound. Past _MAX_DROPPED_STAMPS of them (a writer that died) the
                 # stamps go unseen too, and the gap count finds those samples instead.
                 if len(dropped_stamps) < _MAX_DROPPED_STAMPS:
                     dropped[topic] += 1
-                    dropped_stamps.append((topic, header_stamp_ns(data)))
+                    dropped_stamps.append((topic, header_stamp_ns(data), arrival))
                 return
-            queue.append((topic, data, clock.now().nanoseconds))
+            queue.append((topic, data, clock.now().nanoseconds, arrival))
 
         spec = self._specs[topic]
         self._subscriptions_by_topic[topic] = self.create_subscription(
@@ -228,11 +235,14 @@ class RecorderNode(Node):
     def _drain(self) -> None:
         queue = self._queue
         self.queue_max = max(self.queue_max, len(queue))
-        self._note_dropped()
-        while queue:
-            if self._give_up.is_set():
-                return  # close() counts what is left
-            topic, data, now_ns = queue.popleft()
+        while not self._give_up.is_set():  # after a give-up, close() counts what is left
+            # Read before looking at the queue: whatever arrives later is numbered from here.
+            horizon = self._arrived
+            if not queue:
+                self._note_dropped(before=horizon)
+                return
+            topic, data, now_ns, arrival = queue.popleft()
+            self._note_dropped(before=arrival)
             self.writer.write(topic, data, now_ns, now_ns)
             self.counts[topic] += 1
             self._note_stamp(topic, header_stamp_ns(data))
@@ -243,10 +253,18 @@ class RecorderNode(Node):
         if gaps is not None and stamp_ns is not None:
             gaps.add(stamp_ns)
 
-    def _note_dropped(self) -> None:
-        """Stamps of samples dropped at intake (writer thread, or close once it stopped)."""
-        while self._dropped_stamps:
-            self._note_stamp(*self._dropped_stamps.popleft())
+    def _note_dropped(self, before: int | None = None) -> None:
+        """Stamps of samples dropped at intake that arrived ``before`` (default: all).
+
+        Writer thread, or close once it stopped. In arrival order with the written ones: a
+        burst's dropped stamps noted after later written ones read as gaps first, and the
+        gap count could take back only one of them (seen under load: 546 counted lost for
+        389 dropped, and nothing else lost).
+        """
+        dropped = self._dropped_stamps
+        while dropped and (before is None or dropped[0][2] < before):
+            topic, stamp_ns, _arrival = dropped.popleft()
+            self._note_stamp(topic, stamp_ns)
 
     # -- reporting ------------------------------------------------------------------------
     def loss_summary(self) -> dict[str, dict[str, Any]]:
@@ -321,11 +339,12 @@ class RecorderNode(Node):
         if self._writer_thread.is_alive():
             self._give_up.set()  # the writer stops after the message in hand
             self._writer_thread.join()
-        self._note_dropped()
         while self._queue:
-            topic, data, _now_ns = self._queue.popleft()
+            topic, data, _now_ns, arrival = self._queue.popleft()
+            self._note_dropped(before=arrival)
             self.dropped[topic] += 1
             self._note_stamp(topic, header_stamp_ns(data))
+        self._note_dropped()
         if not self.writer.closed:
             self._store_losses()
             lost = {t: s["lost"] for t, s in self.loss_summary().items() if s["lost"]}
