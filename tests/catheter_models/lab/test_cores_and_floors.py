@@ -179,6 +179,30 @@ def test_a_change_that_does_not_earn_its_place_is_shown_but_not_named() -> None:
     assert "not counted: fraction at the end of its range" in d.text()
 
 
+def _change(effect: str, removes: float) -> Candidate:
+    return Candidate(
+        effect=effect,
+        parameter="x",
+        value_si=1.0,
+        display="1",
+        rmse_train_deg=1.0 - removes,
+        rmse_test_deg=1.0 - removes,
+        expected_reduction=removes,
+        measured_reduction=removes,
+        evidence="",
+        significant=True,
+    )
+
+
+def test_a_core_change_comes_before_a_block_that_removes_more() -> None:
+    # A block scored on a wrong law is partly scored on what it makes up for the law.
+    lag, core = _change("pneumatic_lag", 0.6), _change("core:free_pi", 0.3)
+    d = _diagnosis(1.0, 0.05, 0.3, lag, core)
+    assert d.best is core and d.verdict == "core free_pi"
+    assert "pneumatic_lag removes more (60 %)" in d.text()
+    assert _diagnosis(1.0, 0.05, 0.3, lag).verdict == "add pneumatic_lag"
+
+
 @pytest.mark.parametrize(
     ("effect", "unlike", "like"),
     [

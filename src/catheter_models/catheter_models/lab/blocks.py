@@ -230,6 +230,8 @@ class TransportDelay(Block):
     params = (BlockParam("delay_s", "s", 0.0, 0.2, 0.01, "dead time", 1e3, "ms"),)
     primary = "delay_s"
     needs = "pressure changes faster than the delay"
+    # A dead time also stands in for a smooth lag after the core (a sensor's filter).
+    rival = "output_lag"
 
     def unlike_effect(self, values: Sequence[float]) -> list[str]:
         """A delay shorter than :data:`SHORTEST_TUBE_S` is the valve's own response."""
