@@ -544,8 +544,8 @@ class OutputLag(Block):
     """A first-order lag on the bend, after the core: not in the catalogue.
 
     The sensor's own filter, or a bend that follows its muscle slowly, looks like this. The
-    diagnosis fits it only as the rival of :class:`PneumaticLag` (which side of the
-    hysteresis the lag is on); a person may add it to a chain by hand.
+    diagnosis fits it only as the rival of :class:`PneumaticLag` and :class:`TransportDelay`
+    (which side of the hysteresis the lag is on); a person may add it to a chain by hand.
     """
 
     effect = "output_lag"
