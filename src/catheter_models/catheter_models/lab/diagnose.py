@@ -695,6 +695,7 @@ def _diagnose(
                 model=fitted,
             )
         )
+    rival_deg_by_name: dict[str, float] = {}
     for e in wanted:
         if e in untestable:
             continue
@@ -708,7 +709,9 @@ def _diagnose(
         doubts = _pinned(fitted, e) + block(e).unlike_effect(fitted.blocks_[e])
         rival = BLOCKS[e].rival
         if rival in fits:
-            rival_deg = _rmse_deg(fits[rival].result(), test)
+            if rival not in rival_deg_by_name:  # one rival serves several blocks: score once
+                rival_deg_by_name[rival] = _rmse_deg(fits[rival].result(), test)
+            rival_deg = rival_deg_by_name[rival]
             if rival_deg < RIVAL_SHARE * rmse_test_new:
                 side = FORMS[rival].side
                 doubts.append(
