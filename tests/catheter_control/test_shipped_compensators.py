@@ -36,6 +36,25 @@ def test_shipped_compensator_beats_the_static_inverse(kind: str) -> None:
     assert ours < 0.85 * baseline, (kind, np.degrees(ours), np.degrees(baseline))
 
 
+# Offline tracking bounds [deg] for the shipped c-LSTM, the simulated rig in the loop with the
+# node's limits. Measured 0.19 / 0.22 / 0.15 / 0.46 deg (docs/benchmarks.md); the bounds are
+# 1.5x those: deterministic, so they fail a retrained model that lost a fifth of its accuracy
+# on any one trajectory, not noise. The graph over DDS is tested on two of them
+# (tests/integration/test_compensator.py): real time costs 20-40 s per trajectory there.
+SHIPPED_CLSTM_BOUND_DEG = {
+    "traj_descending_sine": 0.29,
+    "traj_down_chirp": 0.33,
+    "traj_up_chirp": 0.22,
+    "traj_arbitrary_small_variations": 0.69,
+}
+
+
+@pytest.mark.parametrize("name", sorted(SHIPPED_CLSTM_BOUND_DEG))
+def test_the_shipped_c_lstm_follows_each_thesis_trajectory(name: str) -> None:
+    rmse_deg = float(np.degrees(track(load_compensator("clstm", ""), name).metrics.rmse))
+    assert rmse_deg < SHIPPED_CLSTM_BOUND_DEG[name], (name, rmse_deg)
+
+
 def test_the_default_is_the_c_lstm() -> None:
     assert DEFAULT_COMPENSATOR == "clstm"
     assert set(COMPENSATORS) == {"none", "idrdpi", "clstm"}

@@ -1,5 +1,5 @@
-"""The compensator node in the simulated graph, separate processes over DDS: it follows the
-thesis's four trajectories with the shipped c-LSTM, and it stays safe when the laser goes
+"""The compensator node in the simulated graph, separate processes over DDS: it follows
+thesis trajectories with the shipped c-LSTM, and it stays safe when the laser goes
 quiet and when it is sent a trajectory it must refuse (killed: test_faults.py)."""
 
 from __future__ import annotations
@@ -42,7 +42,6 @@ from catheter_models.contract import (
     TIP_ANGLE,
     TRAJECTORY,
 )
-from catheter_models.signals import TEST_TRAJECTORIES
 
 pytestmark = [
     pytest.mark.slow,
@@ -60,12 +59,11 @@ ANGLE_RELAY = Path(__file__).with_name("angle_relay.py")
 # 2.5x those figures, at least 0.5 deg: they tolerate a loaded machine and the sensor noise
 # of a single 20 s run, and fail a compensator that stopped compensating (the static
 # inverse scores 1.00 / 1.77 / 1.07 / 1.74 deg) or a graph that dropped its timing.
-RMSE_BOUND_DEG = {
-    "traj_descending_sine": 0.5,
-    "traj_down_chirp": 0.55,
-    "traj_up_chirp": 0.5,
-    "traj_arbitrary_small_variations": 1.15,
-}
+#
+# Two of the four run here (40 s of real time): the down-chirp, which starts away from rest
+# and needs the lead-in, and the up-chirp. All four are tracked offline with tighter bounds
+# (tests/catheter_control/test_shipped_compensators.py) and over DDS by `make demo`.
+RMSE_BOUND_DEG = {"traj_down_chirp": 0.55, "traj_up_chirp": 0.5}
 
 
 def _assert_pressures_in_range(
@@ -127,7 +125,7 @@ def test_follows_the_thesis_trajectories_with_the_shipped_c_lstm(
         probe.node.destroy_publisher(pub)
 
         results: dict[str, dict[str, float]] = {}
-        for name in TEST_TRAJECTORIES:
+        for name in RMSE_BOUND_DEG:
             run_dir = tmp_path / name
             # Started, not run: the probe keeps spinning meanwhile, so it hears every command.
             proc = children.start(
@@ -163,10 +161,10 @@ def test_follows_the_thesis_trajectories_with_the_shipped_c_lstm(
         ] == pytest.approx(2.0)
         probe.spin_for(0.5)
         _assert_pressures_in_range(commands, measured)
-        assert len(commands) > 100 * 250 * 0.9, len(commands)
+        assert len(commands) > 40 * 250 * 0.9, len(commands)
         last = diagnostic_values(statuses(diags, COMPENSATOR)[-1])
         assert last["compensator"] == "clstm" and last["model_rate_hz"] == "250", last
-        assert int(last["model_steps"]) > 100 * 250, last
+        assert int(last["model_steps"]) > 40 * 250, last
 
 
 def _send(probe: Probe, pub: object, msg: JointTrajectory) -> None:
