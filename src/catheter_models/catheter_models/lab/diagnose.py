@@ -550,6 +550,7 @@ def diagnose(
     effects: Sequence[str] | None = None,
     cores: Sequence[str] | None = None,
     reference: bool = True,
+    reference_deg: float | None = None,
     min_reduction: float = MIN_REDUCTION,
     progress: bool = False,
     workers: int | None = None,
@@ -564,6 +565,8 @@ def diagnose(
         effects: Catalogue effects to try (default: every one the chain lacks).
         cores: Cores to try instead of the chain's (default: every other one; ``[]``: none).
         reference: Fit the black-box reference (seconds); without it, only the noise floor.
+        reference_deg: The reference's held-out RMSE, already fitted on this same split
+            (``explain`` passes its first step's): used as it is, not fitted again.
         min_reduction: Least share of the held-out error a change must remove.
         progress: Show the core's search progress (refits then run in this process).
         workers: Processes for the refits, which are independent (default: one per core
@@ -583,7 +586,8 @@ def diagnose(
         chain = GreyBox.from_drdpi(model) if isinstance(model, DRDPI) else model
         wanted, other_cores = _changes(chain, effects, cores)
     forward = model.direction == "forward"
-    tasks = len(other_cores) + len(wanted) + (1 if reference and forward else 0)
+    fit_reference = reference and forward and reference_deg is None
+    tasks = len(other_cores) + len(wanted) + (1 if fit_reference else 0)
     with (
         refit_executor(workers, progress=progress, tasks=tasks)
         if pool is None or progress
@@ -595,7 +599,8 @@ def diagnose(
             test,
             wanted,
             other_cores,
-            reference=reference,
+            reference=fit_reference,
+            reference_deg=reference_deg if reference else None,
             min_reduction=min_reduction,
             progress=progress,
             pool=chosen,
@@ -610,6 +615,7 @@ def _diagnose(
     other_cores: list[str],
     *,
     reference: bool,
+    reference_deg: float | None,
     min_reduction: float,
     progress: bool,
     pool: Executor,
@@ -617,9 +623,12 @@ def _diagnose(
     """:func:`diagnose` once its changes are known and its pool chosen."""
     noise = noise_std_deg(test)
     forward = model.direction == "forward"
-    reference_future = (
-        pool.submit(_reference_rmse_deg, train, test) if reference and forward else None
-    )
+    reference_future: Future[float] | None = None
+    if reference:
+        reference_future = pool.submit(_reference_rmse_deg, train, test)
+    elif reference_deg is not None and forward:
+        reference_future = Future()
+        reference_future.set_result(reference_deg)
     residual = _residuals(model, test)
     report = _residual_report(test, residual, model.direction)
     rmse_test = float(rad_to_deg(np.sqrt(np.mean(np.concatenate(residual) ** 2))))

@@ -143,6 +143,8 @@ def _explain(
             train,
             test,
             cores=[c for c in CORES if c not in tried_cores],
+            # The reference depends on the split alone: fitted once, for the first step.
+            reference_deg=steps[0].diagnosis.floors.reference_deg,
             progress=progress,
             pool=pool,
         )
