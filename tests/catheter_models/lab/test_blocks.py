@@ -77,8 +77,26 @@ def test_tip_dynamics_do_not_depend_on_the_sample_rate() -> None:
 
 
 def test_drift_adds_a_trend_in_degrees_from_a_rate_in_si() -> None:
-    y = block("drift").apply(np.zeros(2500), RATE_HZ, [math.radians(6.0) / 60])  # 6 deg/min
-    assert y[-1] == pytest.approx(0.1 * 2499 / RATE_HZ, rel=1e-9)
+    # 6 deg/min, settling in 10 h: a straight trend over a 10 s recording.
+    y = block("drift").apply(np.zeros(2500), RATE_HZ, [math.radians(6.0) / 60, 36_000.0])
+    assert y[-1] == pytest.approx(0.1 * 2499 / RATE_HZ, rel=1e-3)
+
+
+def test_a_drift_slows_to_a_stop_at_its_settle_time() -> None:
+    rate_rad_s, settle_s = math.radians(2.0) / 60, 120.0  # 2 deg/min, stops after 2 min
+    t_s = np.arange(0, 300 * 10) / 10.0
+    y = block("drift").apply(np.zeros(t_s.size), 10.0, [rate_rad_s, settle_s])
+    # Starts at its rate, has half the rate halfway, and holds rate * settle / 2 once settled.
+    assert (y[1] - y[0]) * 10.0 == pytest.approx(2.0 / 60, rel=1e-3)
+    assert (y[601] - y[600]) * 10.0 == pytest.approx(1.0 / 60, rel=1e-2)
+    assert np.all(y[t_s >= settle_s] == pytest.approx(2.0 / 60 * settle_s / 2))
+
+
+def test_a_drift_saved_before_its_settle_time_existed_loads_as_a_straight_trend() -> None:
+    # Models saved with the straight-trend form hold only the rate.
+    assert BLOCKS["drift"].check({"rate_rad_per_s": 1e-4}) == [1e-4, 36_000.0]
+    with pytest.raises(ParameterError, match=r"drift\.settle_s = 10\.0 is outside"):
+        BLOCKS["drift"].check({"rate_rad_per_s": 1e-4, "settle_s": 10.0})
 
 
 def test_unknown_and_default_chain_effects_are_refused_by_name() -> None:
@@ -150,7 +168,7 @@ STREAM_VALUES = {
     "pneumatic_lag": [0.08],
     "creep": [0.3, 1.2],
     "tip_dynamics": [6.3, 0.07, 2.0],
-    "drift": [math.radians(5.0) / 60.0],
+    "drift": [math.radians(5.0) / 60.0, 3.3],  # below its bound: the signal sees it settle
     "output_lag": [0.05],
 }
 
