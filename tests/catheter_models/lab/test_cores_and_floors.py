@@ -127,6 +127,43 @@ def test_the_black_box_reference_learns_what_a_plain_core_cannot(creep_case) -> 
     )
 
 
+def test_a_reference_already_fitted_on_the_split_is_used_as_it_is(
+    creep_case, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``explain`` fits the black box once and passes its figure to later diagnoses: a
+    diagnosis given it reports that figure and fits no reference of its own."""
+    import catheter_models.lab.diagnose as diagnose_module
+
+    def no_fit(*_args: object) -> float:
+        raise AssertionError("the reference was fitted again")
+
+    monkeypatch.setattr(diagnose_module, "_reference_rmse_deg", no_fit)
+    model = GreyBox(core="free_pi").fit([creep_case.train], progress=False)
+    given = diagnose(
+        model,
+        [creep_case.train],
+        [creep_case.test],
+        effects=[],
+        cores=[],
+        reference_deg=0.321,
+        workers=1,
+    )
+    assert given.floors.reference_deg == 0.321
+    assert "0.321 deg" in given.text(), given.text()
+    # Without a reference at all the verdict rests on the noise floor alone.
+    bare = diagnose(
+        model,
+        [creep_case.train],
+        [creep_case.test],
+        effects=[],
+        cores=[],
+        reference=False,
+        reference_deg=0.321,
+        workers=1,
+    )
+    assert math.isnan(bare.floors.reference_deg)
+
+
 def _diagnosis(rmse: float, noise: float, reference: float, *candidates: Candidate) -> Diagnosis:
     rng = np.random.default_rng(0)
     report = residual_tests(rng.normal(size=2000), rng.normal(size=2000), 250.0)
