@@ -64,8 +64,16 @@ def creep_case():
     return draw_case(PLANTS["maxwell_slip"], ["creep"], 5)
 
 
-def test_a_free_pi_greybox_saves_loads_and_streams(tmp_path: Path, creep_case) -> None:
-    model = GreyBox(core="free_pi").fit([creep_case.train], progress=False)
+@pytest.fixture(scope="module")
+def free_pi_on_creep(creep_case) -> GreyBox:
+    """The free-weight core alone, fitted once on the creep case (the tests only read it)."""
+    return GreyBox(core="free_pi").fit([creep_case.train], progress=False)
+
+
+def test_a_free_pi_greybox_saves_loads_and_streams(
+    tmp_path: Path, creep_case, free_pi_on_creep: GreyBox
+) -> None:
+    model = free_pi_on_creep
     model.save(tmp_path / "m", training=[creep_case.train])
     loaded = load_model(tmp_path / "m")
     assert isinstance(loaded, GreyBox) and loaded.chain == ("free_pi",)
@@ -108,8 +116,10 @@ def test_a_free_pi_file_without_tension_values_loads_with_fixed_thresholds() -> 
 
 
 @pytest.mark.slow
-def test_a_block_search_refits_a_linear_core_and_finds_the_hidden_creep(creep_case) -> None:
-    base = GreyBox(core="free_pi").fit([creep_case.train], progress=False)
+def test_a_block_search_refits_a_linear_core_and_finds_the_hidden_creep(
+    creep_case, free_pi_on_creep: GreyBox
+) -> None:
+    base = free_pi_on_creep
     crept = base.with_effect("creep").fit([creep_case.train], progress=False)
     before = pooled_rmse(base, [creep_case.test])
     after = pooled_rmse(crept, [creep_case.test])
@@ -119,16 +129,18 @@ def test_a_block_search_refits_a_linear_core_and_finds_the_hidden_creep(creep_ca
     assert fraction == pytest.approx(truth["fraction"], rel=0.5)
 
 
-def test_the_black_box_reference_learns_what_a_plain_core_cannot(creep_case) -> None:
+def test_the_black_box_reference_learns_what_a_plain_core_cannot(
+    creep_case, free_pi_on_creep: GreyBox
+) -> None:
     reference = FilterBankReference().fit([creep_case.train])
-    core_only = GreyBox(core="free_pi").fit([creep_case.train], progress=False)
+    core_only = free_pi_on_creep
     assert reference.rmse_deg([creep_case.test]) < 0.8 * math.degrees(
         pooled_rmse(core_only, [creep_case.test])
     )
 
 
 def test_a_reference_already_fitted_on_the_split_is_used_as_it_is(
-    creep_case, monkeypatch: pytest.MonkeyPatch
+    creep_case, free_pi_on_creep: GreyBox, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """``explain`` fits the black box once and passes its figure to later diagnoses: a
     diagnosis given it reports that figure and fits no reference of its own."""
@@ -138,7 +150,7 @@ def test_a_reference_already_fitted_on_the_split_is_used_as_it_is(
         raise AssertionError("the reference was fitted again")
 
     monkeypatch.setattr(diagnose_module, "_reference_rmse_deg", no_fit)
-    model = GreyBox(core="free_pi").fit([creep_case.train], progress=False)
+    model = free_pi_on_creep
     given = diagnose(
         model,
         [creep_case.train],
