@@ -114,6 +114,15 @@ def run_case(job: tuple[str, str, tuple[str, ...], int, int]) -> dict[str, Any]:
             for c in step.diagnosis.candidates
             if c.doubts
         ],
+        # Steps where pairing the competing cores with the leading block changed the core
+        # chosen (diagnose._pair_cores_with_the_leading_block): what it did, case by case.
+        "pairing_chose": [
+            {"step": i, "chose": best.name, "alone_ahead": ahead.name, "with": best.paired_with}
+            for i, step in enumerate(result.steps)
+            for best in [step.diagnosis.best]
+            for ahead in [next((c for c in step.diagnosis.significant if c.is_core), None)]
+            if best is not None and ahead is not None and best.is_core and best is not ahead
+        ],
         "seconds": time.perf_counter() - t0,
         # Issue 13's speed bars: one diagnose under 60 s, the whole loop under 5 min.
         "drdpi_fit_s": fit_s,

@@ -252,6 +252,63 @@ def test_a_core_change_comes_before_a_block_that_removes_more() -> None:
     assert _diagnosis(1.0, 0.05, 0.3, lag).verdict == "add pneumatic_lag"
 
 
+def test_competing_cores_are_ranked_by_where_they_lead_with_the_leading_block() -> None:
+    # Seed 1004's Maxwell-slip drift: the Bouc-Wen core alone was ahead, but the free-weight
+    # core had fitted the drift in training and with the drift block went far lower.
+    drift = _change("drift", 0.55)
+    boucwen, free_pi = _change("core:boucwen", 0.45), _change("core:free_pi", 0.43)
+    assert _diagnosis(1.0, 0.05, 0.3, drift, boucwen, free_pi).best is boucwen  # not paired
+    boucwen.paired_with, boucwen.paired_test_deg = "drift", 0.99  # worse than alone: 0.55
+    free_pi.paired_with, free_pi.paired_test_deg = "drift", 0.20
+    d = _diagnosis(1.0, 0.05, 0.3, drift, boucwen, free_pi)
+    assert d.best is free_pi and d.verdict == "core free_pi"
+    assert boucwen.reach_deg == boucwen.rmse_test_deg  # a pairing that adds error is ignored
+    assert "free_pi removes 43 %, 0.200 deg with drift" in d.text(), d.text()
+    assert "with drift: 0.990 deg held out" in d.text()
+
+
+def test_cores_are_paired_only_where_they_compete_beside_a_block(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from concurrent.futures import Future
+
+    import catheter_models.lab.diagnose as diagnose_module
+
+    class InProcess:
+        def submit(self, fn, *args):  # type: ignore[no-untyped-def]
+            done: Future[object] = Future()
+            done.set_result(fn(*args))
+            return done
+
+    refits: list[tuple[str, str]] = []
+
+    def fit_change(model: str, change: str, *_: object) -> str:
+        refits.append((model, change))
+        return f"{model}+{change}"
+
+    monkeypatch.setattr(diagnose_module, "_fit_change", fit_change)
+    monkeypatch.setattr(diagnose_module, "_rmse_deg", lambda fitted, _test: len(fitted) / 100)
+
+    def changes(*named: tuple[str, float]) -> list[Candidate]:
+        out = [_change(name, removes) for name, removes in named]
+        for c in out:
+            c.model = c.effect  # type: ignore[assignment]
+        return out
+
+    pair = diagnose_module._pair_cores_with_the_leading_block
+    one_core = changes(("drift", 0.5), ("core:free_pi", 0.4), ("creep", 0.2))
+    pair(one_core, [], [], False, InProcess())  # type: ignore[arg-type]
+    no_block = changes(("core:boucwen", 0.5), ("core:free_pi", 0.4))
+    pair(no_block, [], [], False, InProcess())  # type: ignore[arg-type]
+    assert refits == [] and not any(c.paired_with for c in one_core + no_block)
+    two_cores = changes(("drift", 0.5), ("core:boucwen", 0.45), ("creep", 0.3), ("core:gpi", 0.2))
+    two_cores[2].significant = True
+    pair(two_cores, [], [], False, InProcess())  # type: ignore[arg-type]
+    # Each core once, with the leading block only.
+    assert sorted(refits) == [("core:boucwen", "drift"), ("core:gpi", "drift")]
+    assert two_cores[1].paired_with == "drift" and two_cores[1].paired_test_deg == 0.18
+
+
 @pytest.mark.parametrize(
     ("effect", "unlike", "like"),
     [

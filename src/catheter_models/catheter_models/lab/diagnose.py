@@ -129,6 +129,11 @@ class Candidate:
     """Share of the held-out error removed in the effect's own regimes."""
     doubts: list[str] = field(default_factory=list)
     """Why a change that removes error does not earn its place (empty when it does)."""
+    paired_with: str = ""
+    """For a core change: the leading block it was also refitted with, where cores compete
+    (see :func:`_pair_cores_with_the_leading_block`)."""
+    paired_test_deg: float = float("nan")
+    """Held-out RMSE of this core with :attr:`paired_with` [deg]."""
     model: GreyBox | None = field(default=None, repr=False)
 
     @property
@@ -141,6 +146,13 @@ class Candidate:
         """What a person types: the effect, or the core's name."""
         return self.effect.split(":", 1)[1] if self.is_core else self.effect
 
+    @property
+    def reach_deg(self) -> float:
+        """Held-out RMSE this change leads to: alone, or with its paired block if lower."""
+        if self.paired_with and self.paired_test_deg < self.rmse_test_deg:
+            return self.paired_test_deg
+        return self.rmse_test_deg
+
     def line(self, rank: int) -> str:
         """The ranked list's line a person reads."""
         what = f"{self.parameter} = {self.display}"
@@ -149,6 +161,8 @@ class Candidate:
             f"{-100 * self.measured_reduction:+6.1f} % "  # '+34.7 %': this change adds error
             f"(expected {-100 * self.expected_reduction:+6.1f} % from training)"
         )
+        if self.paired_with:
+            text += f"  with {self.paired_with}: {self.paired_test_deg:.3f} deg held out"
         if self.evidence:
             text += f"  evidence: {self.evidence}"
         if self.doubts:
@@ -218,7 +232,9 @@ class Diagnosis:
         core change is tried again on the new core, not added to the wrong one.
         """
         significant = self.significant
-        cores = [c for c in significant if c.is_core]
+        # Cores are ranked by where they lead: a core that absorbed an effect (fitted it in
+        # training) can beat, alone, the core that would take the effect's block.
+        cores = sorted((c for c in significant if c.is_core), key=lambda c: c.reach_deg)
         return cores[0] if cores else (significant[0] if significant else None)
 
     @property
@@ -263,9 +279,14 @@ class Diagnosis:
         verdict = self.verdict
         best = self.best
         if best is not None and best.is_core:
+            paired = (
+                f", {best.reach_deg:.3f} deg with {best.paired_with}"
+                if best.reach_deg < best.rmse_test_deg
+                else ""
+            )
             lines.append(
                 f"  verdict: the core's law is a miss: {best.name} removes "
-                f"{100 * best.measured_reduction:.0f} %; change it: catheter-lab core "
+                f"{100 * best.measured_reduction:.0f} %{paired}; change it: catheter-lab core "
                 f"{best.name} MODEL -o NEW --train ..."
             )
             first = self.significant[0]
@@ -467,6 +488,39 @@ def _fit_change(
     if change.startswith(f"{CORE_CHANGE}:"):
         return model.with_core(change.split(":", 1)[1]).fit(train, progress=progress)
     return model.with_effect(change).fit(train, progress=progress)
+
+
+def _pair_cores_with_the_leading_block(
+    candidates: list[Candidate],
+    train: Sequence[Recording],
+    test: Sequence[Recording],
+    progress: bool,
+    pool: Executor,
+) -> None:
+    """Refit each significant core with the leading significant block, where cores compete.
+
+    Where two or more core changes earn their place and a block does too, the cores are
+    ranked by the lower of their held-out errors alone and with that block. A core can
+    absorb an effect: on a Maxwell-slip plant with a hidden drift (seed 1004), the Bouc-Wen
+    core alone beat the free-weight core held out (0.93 against 0.98 deg), but the
+    free-weight core had fitted the drift in training (0.19 deg there) and with the drift
+    block reached 0.20 deg, while the Bouc-Wen core with it stayed at 0.99. One more refit per
+    competing core, all in the pool at once. Sets ``paired_with`` and ``paired_test_deg``.
+    """
+    significant = [c for c in candidates if c.significant]
+    cores = {c.effect: (c, c.model) for c in significant if c.is_core and c.model is not None}
+    blocks = [c for c in significant if not c.is_core]
+    if len(cores) < 2 or not blocks:
+        return
+    lead = blocks[0].effect
+    fits = {
+        name: pool.submit(_fit_change, fitted, lead, train, progress)
+        for name, (_, fitted) in cores.items()
+        if fitted is not None
+    }
+    for name, (core, _) in cores.items():
+        core.paired_with = lead
+        core.paired_test_deg = _rmse_deg(fits[name].result(), test)
 
 
 @one_blas_thread
@@ -752,6 +806,7 @@ def _diagnose(
             )
         )
     candidates.sort(key=lambda c: c.measured_reduction, reverse=True)
+    _pair_cores_with_the_leading_block(candidates, train, test, progress, pool)
     return Diagnosis(
         model_kind=model.kind,
         chain=list(model.chain),
