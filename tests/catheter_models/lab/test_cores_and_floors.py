@@ -265,6 +265,11 @@ def test_competing_cores_are_ranked_by_where_they_lead_with_the_leading_block() 
     assert boucwen.reach_deg == boucwen.rmse_test_deg  # a pairing that adds error is ignored
     assert "free_pi removes 43 %, 0.200 deg with drift" in d.text(), d.text()
     assert "with drift: 0.990 deg held out" in d.text()
+    # A pair whose block the next diagnosis would withhold is not counted (seed 1005).
+    boucwen.paired_test_deg, boucwen.paired_doubts = 0.10, ["helps least where drift shows"]
+    d = _diagnosis(1.0, 0.05, 0.3, drift, boucwen, free_pi)
+    assert d.best is free_pi and boucwen.reach_deg == boucwen.rmse_test_deg
+    assert "[not counted: helps least where drift shows]" in d.text(), d.text()
 
 
 def test_cores_are_paired_only_where_they_compete_beside_a_block(
@@ -286,8 +291,13 @@ def test_cores_are_paired_only_where_they_compete_beside_a_block(
         refits.append((model, change))
         return f"{model}+{change}"
 
+    def doubts(fitted: str, *_: object, **__: object) -> tuple[float, list[str]]:
+        return float("nan"), ["helps least where drift shows"] if "gpi" in fitted else []
+
     monkeypatch.setattr(diagnose_module, "_fit_change", fit_change)
     monkeypatch.setattr(diagnose_module, "_rmse_deg", lambda fitted, _test: len(fitted) / 100)
+    monkeypatch.setattr(diagnose_module, "_residuals", lambda model, _test: model)
+    monkeypatch.setattr(diagnose_module, "_block_doubts", doubts)
 
     def changes(*named: tuple[str, float]) -> list[Candidate]:
         out = [_change(name, removes) for name, removes in named]
@@ -295,18 +305,31 @@ def test_cores_are_paired_only_where_they_compete_beside_a_block(
             c.model = c.effect  # type: ignore[assignment]
         return out
 
-    pair = diagnose_module._pair_cores_with_the_leading_block
+    def pair(candidates: list[Candidate]) -> None:
+        diagnose_module._pair_cores_with_the_leading_block(
+            candidates,
+            [],
+            [],
+            regimes=None,  # type: ignore[arg-type]
+            min_reduction=0.1,
+            progress=False,
+            pool=InProcess(),  # type: ignore[arg-type]
+        )
+
     one_core = changes(("drift", 0.5), ("core:free_pi", 0.4), ("creep", 0.2))
-    pair(one_core, [], [], False, InProcess())  # type: ignore[arg-type]
+    pair(one_core)
     no_block = changes(("core:boucwen", 0.5), ("core:free_pi", 0.4))
-    pair(no_block, [], [], False, InProcess())  # type: ignore[arg-type]
+    pair(no_block)
     assert refits == [] and not any(c.paired_with for c in one_core + no_block)
     two_cores = changes(("drift", 0.5), ("core:boucwen", 0.45), ("creep", 0.3), ("core:gpi", 0.2))
-    two_cores[2].significant = True
-    pair(two_cores, [], [], False, InProcess())  # type: ignore[arg-type]
-    # Each core once, with the leading block only.
+    pair(two_cores)
+    # Each core once, with the leading block only (creep is significant too).
     assert sorted(refits) == [("core:boucwen", "drift"), ("core:gpi", "drift")]
-    assert two_cores[1].paired_with == "drift" and two_cores[1].paired_test_deg == 0.18
+    boucwen, gpi = two_cores[1], two_cores[3]
+    assert boucwen.paired_with == "drift" and boucwen.paired_test_deg == 0.18
+    assert boucwen.paired_doubts == [] and boucwen.reach_deg == 0.18
+    # The block's own checks on that core decide whether the pair counts.
+    assert gpi.paired_doubts == ["helps least where drift shows"] and gpi.reach_deg == 0.8
 
 
 @pytest.mark.parametrize(

@@ -134,6 +134,8 @@ class Candidate:
     (see :func:`_pair_cores_with_the_leading_block`)."""
     paired_test_deg: float = float("nan")
     """Held-out RMSE of this core with :attr:`paired_with` [deg]."""
+    paired_doubts: list[str] = field(default_factory=list)
+    """Why the paired block would not earn its place on this core (then it is not counted)."""
     model: GreyBox | None = field(default=None, repr=False)
 
     @property
@@ -149,8 +151,8 @@ class Candidate:
     @property
     def reach_deg(self) -> float:
         """Held-out RMSE this change leads to: alone, or with its paired block if lower."""
-        if self.paired_with and self.paired_test_deg < self.rmse_test_deg:
-            return self.paired_test_deg
+        if self.paired_with and not self.paired_doubts:
+            return min(self.paired_test_deg, self.rmse_test_deg)
         return self.rmse_test_deg
 
     def line(self, rank: int) -> str:
@@ -163,6 +165,8 @@ class Candidate:
         )
         if self.paired_with:
             text += f"  with {self.paired_with}: {self.paired_test_deg:.3f} deg held out"
+            if self.paired_doubts:
+                text += f" [not counted: {'; '.join(self.paired_doubts)}]"
         if self.evidence:
             text += f"  evidence: {self.evidence}"
         if self.doubts:
@@ -490,10 +494,39 @@ def _fit_change(
     return model.with_effect(change).fit(train, progress=progress)
 
 
+def _block_doubts(
+    fitted: GreyBox,
+    effect: str,
+    base_residual: Sequence[FloatArray],
+    *,
+    regimes: _Regimes,
+    test: Sequence[Recording],
+    measured: float,
+) -> tuple[float, list[str]]:
+    """The share ``fitted`` removes in ``effect``'s regimes, and why it would not count.
+
+    Pinned parameters, values the effect never has, or help least where the effect shows;
+    the rival check needs one more refit and is the caller's.
+    """
+    before = regimes.rmse_deg(base_residual, EFFECT_REGIMES[effect])
+    after = regimes.rmse_deg(_residuals(fitted, test), EFFECT_REGIMES[effect])
+    in_regime = (before - after) / before if before > 0 else float("nan")
+    doubts = _pinned(fitted, effect) + block(effect).unlike_effect(fitted.blocks_[effect])
+    if math.isfinite(in_regime) and in_regime < REGIME_SHARE * measured:
+        doubts.append(
+            f"helps least where {effect} shows ({', '.join(EFFECT_REGIMES[effect])}: "
+            f"{-100 * in_regime:+.0f} % there)"  # '+59 %': it adds error there
+        )
+    return in_regime, doubts
+
+
 def _pair_cores_with_the_leading_block(
     candidates: list[Candidate],
     train: Sequence[Recording],
     test: Sequence[Recording],
+    *,
+    regimes: _Regimes,
+    min_reduction: float,
     progress: bool,
     pool: Executor,
 ) -> None:
@@ -506,6 +539,11 @@ def _pair_cores_with_the_leading_block(
     free-weight core had fitted the drift in training (0.19 deg there) and with the drift
     block reached 0.20 deg, while the Bouc-Wen core with it stayed at 0.99. One more refit per
     competing core, all in the pool at once. Sets ``paired_with`` and ``paired_test_deg``.
+
+    The pair counts only where the block would earn its place on that core in the next
+    diagnosis (the same share removed and the same checks, its rival aside): on a Bouc-Wen
+    plant's drift (seed 1005), the Bouc-Wen core with a drift block that helped least at
+    rest outranked the free-weight core, and the next diagnosis withheld the drift.
     """
     significant = [c for c in candidates if c.significant]
     cores = {c.effect: (c, c.model) for c in significant if c.is_core and c.model is not None}
@@ -518,9 +556,18 @@ def _pair_cores_with_the_leading_block(
         for name, (_, fitted) in cores.items()
         if fitted is not None
     }
-    for name, (core, _) in cores.items():
-        core.paired_with = lead
-        core.paired_test_deg = _rmse_deg(fits[name].result(), test)
+    for name, (core, alone) in cores.items():
+        paired = fits[name].result()
+        rmse_train, rmse_test = _rmse_deg(paired, train), _rmse_deg(paired, test)
+        measured = (core.rmse_test_deg - rmse_test) / core.rmse_test_deg
+        expected = (core.rmse_train_deg - rmse_train) / core.rmse_train_deg
+        assert alone is not None
+        _, doubts = _block_doubts(
+            paired, lead, _residuals(alone, test), regimes=regimes, test=test, measured=measured
+        )
+        if not (measured >= min_reduction and expected >= 0.5 * min_reduction):
+            doubts.insert(0, f"removes {100 * measured:.0f} % on this core")
+        core.paired_with, core.paired_test_deg, core.paired_doubts = lead, rmse_test, doubts
 
 
 @one_blas_thread
@@ -766,10 +813,9 @@ def _diagnose(
         rmse_train, rmse_test_new, expected, measured = scored(e, fitted)
         spec = next(p for p in BLOCKS[e].params if p.name == BLOCKS[e].primary)
         value = fitted.block_values()[e][spec.name]
-        before = regimes.rmse_deg(residual, EFFECT_REGIMES[e])
-        after = regimes.rmse_deg(_residuals(fitted, test), EFFECT_REGIMES[e])
-        in_regime = (before - after) / before if before > 0 else float("nan")
-        doubts = _pinned(fitted, e) + block(e).unlike_effect(fitted.blocks_[e])
+        in_regime, doubts = _block_doubts(
+            fitted, e, residual, regimes=regimes, test=test, measured=measured
+        )
         rival = BLOCKS[e].rival
         if rival in fits:
             if rival not in rival_deg_by_name:  # one rival serves several blocks: score once
@@ -782,11 +828,6 @@ def _diagnose(
                     f"({rival_deg:.3f} deg against {rmse_test_new:.3f}): the effect is on "
                     f"the {side} side, where the catalogue has no block for it"
                 )
-        if math.isfinite(in_regime) and in_regime < REGIME_SHARE * measured:
-            doubts.append(
-                f"helps least where {e} shows ({', '.join(EFFECT_REGIMES[e])}: "
-                f"{-100 * in_regime:+.0f} % there)"  # '+59 %': it adds error there
-            )
         removes = measured >= min_reduction and expected >= 0.5 * min_reduction
         candidates.append(
             Candidate(
@@ -806,7 +847,15 @@ def _diagnose(
             )
         )
     candidates.sort(key=lambda c: c.measured_reduction, reverse=True)
-    _pair_cores_with_the_leading_block(candidates, train, test, progress, pool)
+    _pair_cores_with_the_leading_block(
+        candidates,
+        train,
+        test,
+        regimes=regimes,
+        min_reduction=min_reduction,
+        progress=progress,
+        pool=pool,
+    )
     return Diagnosis(
         model_kind=model.kind,
         chain=list(model.chain),
