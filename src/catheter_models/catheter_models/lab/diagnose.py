@@ -494,6 +494,11 @@ def _fit_change(
     return model.with_effect(change).fit(train, progress=progress)
 
 
+def _removes_enough(measured: float, expected: float, min_reduction: float) -> bool:
+    """Whether a change removes enough held-out error (and some on the training data)."""
+    return measured >= min_reduction and expected >= 0.5 * min_reduction
+
+
 def _block_doubts(
     fitted: GreyBox,
     effect: str,
@@ -546,26 +551,21 @@ def _pair_cores_with_the_leading_block(
     rest outranked the free-weight core, and the next diagnosis withheld the drift.
     """
     significant = [c for c in candidates if c.significant]
-    cores = {c.effect: (c, c.model) for c in significant if c.is_core and c.model is not None}
+    cores = {c.model: c for c in significant if c.is_core and c.model is not None}
     blocks = [c for c in significant if not c.is_core]
     if len(cores) < 2 or not blocks:
         return
     lead = blocks[0].effect
-    fits = {
-        name: pool.submit(_fit_change, fitted, lead, train, progress)
-        for name, (_, fitted) in cores.items()
-        if fitted is not None
-    }
-    for name, (core, alone) in cores.items():
-        paired = fits[name].result()
+    fits = {alone: pool.submit(_fit_change, alone, lead, train, progress) for alone in cores}
+    for alone, core in cores.items():
+        paired = fits[alone].result()
         rmse_train, rmse_test = _rmse_deg(paired, train), _rmse_deg(paired, test)
         measured = (core.rmse_test_deg - rmse_test) / core.rmse_test_deg
         expected = (core.rmse_train_deg - rmse_train) / core.rmse_train_deg
-        assert alone is not None
         _, doubts = _block_doubts(
             paired, lead, _residuals(alone, test), regimes=regimes, test=test, measured=measured
         )
-        if not (measured >= min_reduction and expected >= 0.5 * min_reduction):
+        if not _removes_enough(measured, expected, min_reduction):
             doubts.insert(0, f"removes {100 * measured:.0f} % on this core")
         core.paired_with, core.paired_test_deg, core.paired_doubts = lead, rmse_test, doubts
 
@@ -801,7 +801,7 @@ def _diagnose(
                 expected_reduction=expected,
                 measured_reduction=measured,
                 evidence="",
-                significant=measured >= min_reduction and expected >= 0.5 * min_reduction,
+                significant=_removes_enough(measured, expected, min_reduction),
                 model=fitted,
             )
         )
@@ -828,7 +828,7 @@ def _diagnose(
                     f"({rival_deg:.3f} deg against {rmse_test_new:.3f}): the effect is on "
                     f"the {side} side, where the catalogue has no block for it"
                 )
-        removes = measured >= min_reduction and expected >= 0.5 * min_reduction
+        removes = _removes_enough(measured, expected, min_reduction)
         candidates.append(
             Candidate(
                 effect=e,
