@@ -25,11 +25,37 @@ def step(n: int = 2500, at: int = 250) -> np.ndarray:
     return x
 
 
+PLAIN_LAG = [0.1, 1.0, 1e8]  # no venting asymmetry, no flow limit
+
+
 def test_lag_reaches_63_percent_after_one_time_constant() -> None:
-    y = block("pneumatic_lag").apply(step(), RATE_HZ, [0.1])
+    y = block("pneumatic_lag").apply(step(), RATE_HZ, PLAIN_LAG)
     # The step enters at sample 250 and counts as the first of the 25 samples of 0.1 s.
     assert y[250 + 24] == pytest.approx(1 - math.exp(-1), abs=1e-9)
     assert y[0] == 0.0 and y[-1] == pytest.approx(1.0, abs=1e-6)
+
+
+def test_a_lag_whose_flow_chokes_ramps_then_relaxes() -> None:
+    # 2 bar/s at most: a 1 bar step ramps for the first half second, where the plain
+    # lag's own slope (1 bar / 0.1 s) is faster, then relaxes as the plain lag does.
+    y = block("pneumatic_lag").apply(step(), RATE_HZ, [0.1, 1.0, 2e5])
+    assert np.diff(y).max() == pytest.approx(2.0 / RATE_HZ, rel=1e-9)
+    assert y[250 + 49] == pytest.approx(50 * 2.0 / RATE_HZ, rel=1e-9)  # still on the ramp
+    assert y[-1] == pytest.approx(1.0, abs=1e-3)
+    plain = block("pneumatic_lag").apply(step(), RATE_HZ, PLAIN_LAG)
+    assert np.all(y <= plain + 1e-12)
+
+
+def test_a_lag_vents_at_its_own_time_constant() -> None:
+    down = 1.0 - step()
+    y = block("pneumatic_lag").apply(down, RATE_HZ, [0.1, 2.0, 1e8])  # vents in 0.2 s
+    assert y[250 + 49] == pytest.approx(math.exp(-1), abs=1e-9)
+    rise = block("pneumatic_lag").apply(step(), RATE_HZ, [0.1, 2.0, 1e8])
+    assert rise[250 + 24] == pytest.approx(1 - math.exp(-1), abs=1e-9)  # fills in 0.1 s
+
+
+def test_a_lag_saved_before_venting_and_flow_limits_loads_as_the_plain_lag() -> None:
+    assert BLOCKS["pneumatic_lag"].check({"time_constant_s": 0.04}) == [0.04, 1.0, 1e8]
 
 
 def test_delay_shifts_by_the_delay() -> None:
@@ -38,9 +64,26 @@ def test_delay_shifts_by_the_delay() -> None:
 
 
 def test_creep_jumps_by_the_instant_share_then_creeps() -> None:
-    y = block("creep").apply(step(), RATE_HZ, [0.2, 1.0])
+    y = block("creep").apply(step(), RATE_HZ, [0.2, 1.0, 1.0])
     assert y[250] == pytest.approx(0.8, abs=0.01)
     assert y[250 + 250] == pytest.approx(0.8 + 0.2 * (1 - math.exp(-1)), abs=0.01)
+
+
+def test_a_spread_creep_is_faster_at_first_and_still_going_when_one_lag_has_settled() -> None:
+    t_s = np.arange(30 * RATE_HZ) / RATE_HZ
+    x = (t_s >= 1.0).astype(float)
+    one = block("creep").apply(x, RATE_HZ, [0.2, 1.0, 1.0])
+    spread = block("creep").apply(x, RATE_HZ, [0.2, 1.0, 9.0])  # branches at 1/3 s and 3 s
+    after = (t_s - 1.0)[250 + 75]  # 0.3 s after the step
+    expected = 0.8 + 0.1 * ((1 - math.exp(-after * 3.0)) + (1 - math.exp(-after / 3.0)))
+    assert spread[250 + 75] == pytest.approx(expected, abs=1e-3)
+    assert spread[250 + 75] > one[250 + 75]  # the fast branch leads
+    assert spread[250 + 1250] < one[250 + 1250] - 0.01  # 5 s on: the slow one still creeps
+    assert spread[-1] == pytest.approx(1.0, abs=1e-3)
+
+
+def test_a_creep_saved_before_its_spread_existed_loads_as_one_lag() -> None:
+    assert BLOCKS["creep"].check({"fraction": 0.2, "time_constant_s": 1.5}) == [0.2, 1.5, 1.0]
 
 
 def test_tip_dynamics_ring_at_the_natural_frequency() -> None:
@@ -165,8 +208,8 @@ def test_a_model_file_that_lists_an_effect_without_parameters_asks_for_a_refit(
 # Off-grid values (a delay of 37.3 samples, a tip between sub-steps): the stream must match.
 STREAM_VALUES = {
     "transport_delay": [0.1491],
-    "pneumatic_lag": [0.08],
-    "creep": [0.3, 1.2],
+    "pneumatic_lag": [0.08, 1.7, 5e5],
+    "creep": [0.3, 1.2, 6.0],
     "tip_dynamics": [6.3, 0.07, 2.0],
     "drift": [math.radians(5.0) / 60.0, 3.3],  # below its bound: the signal sees it settle
     "output_lag": [0.05],

@@ -336,7 +336,8 @@ def test_cores_are_paired_only_where_they_compete_beside_a_block(
     ("effect", "unlike", "like"),
     [
         ("transport_delay", [0.005], [0.03]),  # 5 ms: the valve; 30 ms: a tube's dead time
-        ("pneumatic_lag", [0.004], [0.025]),
+        ("pneumatic_lag", [0.004, 1.5, 1e8], [0.025, 1.0, 1e8]),
+        ("pneumatic_lag", [0.004, 2.0, 1e6], [0.006, 2.0, 1e6]),  # 12 ms to vent: the tube's
         ("tip_dynamics", [3.0, 0.9, 0.0], [4.0, 0.12, 0.2]),  # a tip rings; 0.9 does not
     ],
 )
@@ -488,6 +489,9 @@ def test_a_block_at_zero_growth_is_a_plain_answer_but_at_its_limit_it_is_doubted
     from catheter_models.lab.diagnose import _pinned
 
     model = GreyBox(core="free_pi", effects=["tip_dynamics", "creep"])
-    model.blocks_ = {"tip_dynamics": [4.9, 0.12, 0.03], "creep": [0.5, 2.0]}
+    model.blocks_ = {"tip_dynamics": [4.9, 0.12, 0.03], "creep": [0.5, 2.0, 1.0]}
     assert _pinned(model, "tip_dynamics") == []  # no growth of the damping: a real answer
-    assert [d.split()[0] for d in _pinned(model, "creep")] == ["fraction"]  # at its 50 % cap
+    # At its 50 % cap; one lag (no spread, the block's earlier form) is a plain answer.
+    assert [d.split()[0] for d in _pinned(model, "creep")] == ["fraction"]
+    model.blocks_["creep"] = [0.2, 2.0, 30.0]  # the widest spread: standing in for more
+    assert [d.split()[0] for d in _pinned(model, "creep")] == ["spread"]

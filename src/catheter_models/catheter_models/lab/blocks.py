@@ -5,8 +5,9 @@ A grey-box model is a chain: input blocks (pressure to pressure), the thesis's D
 blocks (bend to bend). Each block here is the *approximation* a person would write down to
 identify an effect, not the plant's physics: the simulated plant fills the muscle through an
 orifice (a nonlinear flow), the block is a first-order lag; the plant creeps through two
-Maxwell branches, the block through one. So a diagnosis that finds the plant's effect with
-the block is a test of the method, not of code agreeing with itself.
+Maxwell branches in the bending stiffness, inside the force balance with the wire's friction,
+the block delays a share of the bend itself through two lags. So a diagnosis that finds the
+plant's effect with the block is a test of the method, not of code agreeing with itself.
 
 Blocks work on one recording at a time, from rest, in the chain's internal units: input
 blocks on pressure in bar, output blocks on bend in degrees; their parameters are SI.
@@ -42,6 +43,10 @@ MOST_TIP_DAMPING: Final = 0.5
 """Largest damping ratio, with the tip straight, that still shows as a tip's ringing. Rigs show
 0.05-0.15; above 0.5 a step overshoots by under 16 %, below what the laser's noise and the
 hysteresis hide, and a second-order fit there is a smooth lag in disguise."""
+
+PLAIN_LAG_RATE_BAR_PER_S: Final = 1e3
+"""A pressure slew no valve command on a 0-3 bar muscle needs limiting at (a full step in
+3 ms): the pneumatic lag's flow limit at or above it is no limit."""
 
 DEFAULT_CHAIN_EFFECTS: Final = ("play", "rate_dependence", "deadband", "asymmetry", "saturation")
 """The effects the thesis's DRDPI already carries (the default chain)."""
@@ -82,6 +87,13 @@ class Block(ABC):
     """The parameter the diagnosis reports (a time constant, a delay, a frequency...)."""
     needs: ClassVar[str]
     """What excitation identifies it, for the 'too little excitation' message."""
+    staged_search: ClassVar[bool] = False
+    """Search the block's earlier form first (its parameters with an ``absent`` value held
+    there, on that form's grid), then the added parameters around its best points. For
+    parameters that refine a form which already fits (a creep's spread, a lag's venting and
+    flow limit): a joint grid as fine as the earlier form's would cost their product, and a
+    coarse one misses the earlier form's own optimum. Not where the parameters trade against
+    each other (a drift's settle time against its rate)."""
     rival: ClassVar[str] = ""
     """A form outside the catalogue (:data:`CHECKS`) that gives the same signature from the
     core's other side. Where it fits the held-out data clearly better, the effect is not
@@ -197,33 +209,117 @@ def _valve_sized(time_s: float, what: str, of_a_rig: str) -> list[str]:
     return []
 
 
+@njit(cache=True)
+def _fill_vent_kernel(
+    x: FloatArray, dt_s: float, fill_s: float, vent_s: float, max_step: float
+) -> FloatArray:
+    """A first-order lag that vents at its own rate and moves at most ``max_step`` a sample."""
+    out = np.empty_like(x)
+    p = x[0]
+    a_fill = 1.0 - math.exp(-dt_s / fill_s)
+    a_vent = 1.0 - math.exp(-dt_s / vent_s)
+    for k in range(x.size):
+        err = x[k] - p
+        dp = err * a_fill if err >= 0.0 else err * a_vent
+        dp = min(max(dp, -max_step), max_step)
+        p += dp
+        out[k] = p
+    return out
+
+
 class PneumaticLag(Block):
-    """Tube compliance and air compressibility as a first-order lag on pressure."""
+    """Filling the tube and muscle: a first-order lag on pressure, limited by the valve's flow.
+
+    Air fills the muscle through an orifice: near the set-point the flow is about linear in
+    the pressure difference (a first-order lag), far from it the flow chokes and the pressure
+    can rise no faster than the valve passes air (a slew limit); venting to the atmosphere
+    runs through another pressure difference than filling from the supply, so it has its own
+    time. ``vent_ratio`` = 1 and ``max_rate_pa_per_s`` at its top (no limit a step of the
+    full range reaches) are the plain lag, the block's earlier form.
+    """
 
     effect = "pneumatic_lag"
     side: ClassVar[Side] = "input"
     params = (
         BlockParam(
-            "time_constant_s", "s", 0.002, 0.5, 0.03, "lag of muscle behind valve", 1e3, "ms"
+            "time_constant_s",
+            "s",
+            0.002,
+            0.5,
+            0.03,
+            "lag of muscle behind valve (filling)",
+            1e3,
+            "ms",
+        ),
+        BlockParam(
+            "vent_ratio",
+            "1",
+            1.0 / 3.0,
+            3.0,
+            1.0,
+            "venting time constant over filling's",
+            display_unit="x",
+            grid_points=3,
+            absent=1.0,
+        ),
+        BlockParam(
+            "max_rate_pa_per_s",
+            "Pa/s",
+            2e5,
+            1e8,
+            1e8,
+            "fastest the valve's flow moves the muscle's pressure (top: no limit)",
+            1e-5,
+            "bar/s",
+            grid_points=4,
+            absent=1e8,
         ),
     )
     primary = "time_constant_s"
     needs = "pressure changes of a few hundred ms or faster"
+    staged_search = True
     # Before a hysteresis a lag shifts each reversal; after it, it rounds the reversal's
     # corner. Both remove much of the same error, so only the better fit tells the side.
     rival = "output_lag"
 
     def unlike_effect(self, values: Sequence[float]) -> list[str]:
-        """A lag shorter than :data:`SHORTEST_TUBE_S` is the valve's own response."""
-        return _valve_sized(values[0], "lag", "tube and muscle fill")
+        """A lag shorter than :data:`SHORTEST_TUBE_S` both ways is the valve's own response."""
+        # Filling or venting slower than a valve is the tube's: the other way may be quick
+        # (a supply far above the muscle's pressure fills it fast).
+        return _valve_sized(max(values[0], values[0] * values[1]), "lag", "tube and muscle fill")
+
+    @staticmethod
+    def _terms(rate_hz: float, values: Sequence[float]) -> tuple[float, float, float, float]:
+        """(dt [s], fill and vent time constants [s], largest step a sample [bar])."""
+        fill_s, vent_ratio, max_rate_pa_per_s = values
+        dt_s = 1.0 / rate_hz
+        return dt_s, fill_s, fill_s * vent_ratio, max_rate_pa_per_s * 1e-5 * dt_s
 
     def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:
-        """The muscle's pressure [bar]: the valve's through a first-order lag."""
-        return _lowpass1(x, rate_hz, values[0])
+        """The muscle's pressure [bar]: the valve's through the lag."""
+        dt_s, fill_s, vent_s, max_step = self._terms(rate_hz, values)
+        if fill_s == vent_s and max_step * rate_hz >= PLAIN_LAG_RATE_BAR_PER_S:
+            return _lowpass1(x, rate_hz, fill_s)  # the plain lag: exact and vectorised
+        contiguous = np.ascontiguousarray(x, dtype=float)
+        return _fill_vent_kernel(contiguous, dt_s, fill_s, vent_s, max_step)
 
     def streamer(self, rate_hz: float, values: Sequence[float]) -> Step:
         """The lag, one sample at a time."""
-        return _Lowpass1Stream(rate_hz, values[0]).step
+        dt_s, fill_s, vent_s, max_step = self._terms(rate_hz, values)
+        a_fill = 1.0 - math.exp(-dt_s / fill_s)
+        a_vent = 1.0 - math.exp(-dt_s / vent_s)
+        state: list[float] = []
+
+        def step(x: float) -> float:
+            if not state:
+                state.append(x)
+                return x
+            err = x - state[0]
+            dp = err * a_fill if err >= 0.0 else err * a_vent
+            state[0] += min(max(dp, -max_step), max_step)
+            return state[0]
+
+        return step
 
 
 class TransportDelay(Block):
@@ -273,40 +369,68 @@ class TransportDelay(Block):
 
 
 class Creep(Block):
-    """Viscoelastic relaxation: a share of each bend change arrives through one slow lag."""
+    """Viscoelastic relaxation: a share of each bend change arrives through slow lags.
+
+    A polymer relaxes over a spread of times, not at one: a step's creep is fast at first and
+    still going long after. The block's two equal branches, ``spread`` apart around
+    ``time_constant_s`` (their geometric mean), are the least form that has such a spread;
+    ``spread`` = 1 is one lag, the block's earlier form.
+    """
 
     effect = "creep"
     side: ClassVar[Side] = "output"
     params = (
         BlockParam("fraction", "1", 0.0, 0.5, 0.05, "share of a step that creeps", 100.0, "%"),
         BlockParam("time_constant_s", "s", 0.1, 30.0, 1.5, "creep time constant"),
+        BlockParam(
+            "spread",
+            "1",
+            1.0,
+            30.0,
+            1.0,
+            "slow branch's time constant over the fast one's",
+            display_unit="x",
+            absent=1.0,
+        ),
     )
-    # The share is what data pins down; the single time constant is a compromise between
-    # the real material's several (the plant has two, at tau/2 and 2 tau).
+    # The share is what data pins down; the time constants are a compromise between the
+    # real material's many.
     primary = "fraction"
     needs = "plateaus of at least a second after pressure steps"
+    staged_search = True
+
+    @staticmethod
+    def _branches(values: Sequence[float]) -> tuple[float, float, float]:
+        fraction, tau, spread = values
+        root = math.sqrt(spread)
+        return fraction, tau / root, tau * root
 
     def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:
-        """The bend [deg] with ``fraction`` of every change delayed by a slow lag."""
-        fraction, tau = values
-        out: FloatArray = (1.0 - fraction) * x + fraction * _lowpass1(x, rate_hz, tau)
+        """The bend [deg] with ``fraction`` of every change delayed by the two slow lags."""
+        fraction, fast, slow = self._branches(values)
+        creeping = 0.5 * (_lowpass1(x, rate_hz, fast) + _lowpass1(x, rate_hz, slow))
+        out: FloatArray = (1.0 - fraction) * x + fraction * creeping
         return out
 
     def apply_columns(
         self, m: FloatArray, rate_hz: float, values: Sequence[float], reference: FloatArray
     ) -> FloatArray:
         """Creep is linear: every column at once."""
-        fraction, tau = values
-        a = math.exp(-1.0 / (rate_hz * tau))
-        lag, _ = sps.lfilter([1.0 - a], [1.0, -a], m, axis=0, zi=a * m[:1, :])
-        out: FloatArray = (1.0 - fraction) * m + fraction * lag
+        fraction, fast, slow = self._branches(values)
+        creeping = np.zeros_like(m)
+        for tau in (fast, slow):
+            a = math.exp(-1.0 / (rate_hz * tau))
+            lag, _ = sps.lfilter([1.0 - a], [1.0, -a], m, axis=0, zi=a * m[:1, :])
+            creeping += 0.5 * lag
+        out: FloatArray = (1.0 - fraction) * m + fraction * creeping
         return out
 
     def streamer(self, rate_hz: float, values: Sequence[float]) -> Step:
         """Creep, one sample at a time."""
-        fraction, tau = values
-        lag = _Lowpass1Stream(rate_hz, tau).step
-        return lambda x: (1.0 - fraction) * x + fraction * lag(x)
+        fraction, fast, slow = self._branches(values)
+        lag_fast = _Lowpass1Stream(rate_hz, fast).step
+        lag_slow = _Lowpass1Stream(rate_hz, slow).step
+        return lambda x: (1.0 - fraction) * x + fraction * 0.5 * (lag_fast(x) + lag_slow(x))
 
     def excitation_problem(self, inputs: Sequence[FloatArray], rate_hz: float) -> str:
         """Creep shows only where the pressure holds still after a change."""

@@ -471,15 +471,18 @@ def _pinned(model: GreyBox, effect: str) -> list[str]:
         span = p.high - p.low
         if effect == "drift":
             continue  # a drift's range is symmetric: either end is a plain answer
-        if p.low == 0.0:
-            # Zero (no delay, no share, no growth of the tip's damping) is a plain answer;
-            # only the top of the range means the block stands in for something else.
-            near = p.high - v < 0.01 * span
-        elif p.high / p.low > 10.0:
-            near = min(math.log(v / p.low), math.log(p.high / v)) < 0.01 * math.log(p.high / p.low)
+        if p.low > 0.0 and p.high / p.low > 10.0:
+            width = math.log(p.high / p.low)
+            at_low = math.log(v / p.low) < 0.01 * width
+            at_high = math.log(p.high / v) < 0.01 * width
         else:
-            near = min(v - p.low, p.high - v) < 0.01 * span
-        if near:
+            at_low, at_high = v - p.low < 0.01 * span, p.high - v < 0.01 * span
+        # Zero (no delay, no share, no growth of the tip's damping) and the block's earlier,
+        # simpler form (one creep lag, a lag without a flow limit) are plain answers; any
+        # other end of a range means the block stands in for something else.
+        plain_low = p.low in (0.0, p.absent)
+        plain_high = p.high == p.absent
+        if (at_high and not plain_high) or (at_low and not plain_low):
             pinned.append(f"{p.name} at the end of its range ({p.display(v)})")
     return pinned
 

@@ -76,13 +76,23 @@ GRID_POINTS: Final = {1: 12, 2: 6, 3: 4}
 
 
 def _grid(p: BlockParam, n_params: int) -> FloatArray:
-    """The search grid of one block parameter: log-spaced over a positive range."""
+    """The search grid of one block parameter: log-spaced over a positive range.
+
+    A parameter's ``absent`` value (the block's earlier, simpler form: one creep lag, a lag
+    without a flow limit) is always on it, so the search meets the simpler form too.
+    """
     n = p.grid_points or GRID_POINTS.get(n_params, 3)
     if p.low >= 0.0 and p.high > 0.0:
         low = p.low if p.low > 0.0 else 1e-2 * p.high
         points = np.geomspace(low, p.high, n)
-        return np.concatenate([[0.0], points]) if p.low == 0.0 else points
-    return np.linspace(p.low, p.high, n + 1 - n % 2)  # odd: 0 is on the grid
+        if p.low == 0.0:
+            points = np.concatenate([[0.0], points])
+    else:
+        points = np.linspace(p.low, p.high, n + 1 - n % 2)  # odd: 0 is on the grid
+    if p.absent is not None and p.low <= p.absent <= p.high:
+        near = np.isclose(points, p.absent, rtol=1e-9, atol=0.0)
+        points = np.where(near, p.absent, points) if near.any() else np.sort([*points, p.absent])
+    return np.asarray(points, dtype=float)
 
 
 class _Unit:
@@ -425,6 +435,21 @@ class _Fitter:
     def loss(self, blocks: Mapping[str, Sequence[float]]) -> float:
         raise NotImplementedError
 
+    @staticmethod
+    def _grid_of(effect: str) -> list[list[float]]:
+        """The first grid of a new block: every parameter's, or the earlier form's alone."""
+        params = FORMS[effect].params
+        if not FORMS[effect].staged_search:
+            return [
+                [float(c) for c in combo]
+                for combo in itertools.product(*(_grid(p, len(params)) for p in params))
+            ]
+        earlier = [p for p in params if p.absent is None]
+        grids = [
+            _grid(p, len(earlier)) if p.absent is None else np.array([p.absent]) for p in params
+        ]
+        return [[float(c) for c in combo] for combo in itertools.product(*grids)]
+
     def prepare(self, blocks: Mapping[str, Sequence[float]], new: Sequence[str]) -> None:
         """Set-up before a search (nothing by default)."""
 
@@ -440,12 +465,33 @@ class _Fitter:
         for e in new:
             scored: list[tuple[float, dict[str, list[float]]]] = []
             base = starts[0]
-            n_params = len(FORMS[e].params)
-            for combo in itertools.product(*(_grid(p, n_params) for p in FORMS[e].params)):
-                trial = {**base, e: [float(c) for c in combo]}
+            params = FORMS[e].params
+            for combo in self._grid_of(e):
+                trial = {**base, e: combo}
                 scored.append((self.loss(trial), trial))
+            earliest: list[dict[str, list[float]]] = []
+            if FORMS[e].staged_search:
+                # Then the added parameters, around the earlier form's best points; the
+                # earlier form's best starts a polish too, so the search does at least
+                # what it did before the block grew (a coarse fit of the added parameters
+                # can lead the polish to a worse optimum).
+                scored.sort(key=lambda t: t[0])
+                earliest = [scored[0][1]]
+                added = [i for i, p in enumerate(params) if p.absent is not None]
+                for _, point in scored[:STARTS]:
+                    grids = [_grid(params[i], len(params)) for i in added]
+                    for combo_added in itertools.product(*grids):
+                        values = list(point[e])
+                        for i, v in zip(added, combo_added, strict=True):
+                            values[i] = float(v)
+                        if values == point[e]:
+                            continue  # the earlier form's point: scored already
+                        trial = {**base, e: values}
+                        scored.append((self.loss(trial), trial))
             scored.sort(key=lambda t: t[0])
             starts = [t[1] for t in scored[:STARTS]]
+            if earliest and earliest[0] not in starts:
+                starts[-1] = earliest[0]
         best: tuple[float, dict[str, list[float]], Core] | None = None
         core0 = self.core
         for start in starts:
@@ -479,15 +525,20 @@ class _NonlinearFitter(_Fitter):
         lo_c, hi_c = core.bounds()
         lo_b, hi_b = self.block_bounds()
         n_core = lo_c.size
-        lo, hi = np.concatenate([lo_c, lo_b]), np.concatenate([hi_c, hi_b])
-        v0 = np.clip(np.concatenate([core.vector(), self.pack(blocks)]), lo, hi)
+        # Blocks' parameters move in [0, 1] (log over ranges wider than a decade): a flow
+        # limit of 1e8 Pa/s and a share of 0.2 then take like steps, which a raw vector's
+        # relative finite differences and the Jacobian's scaling do not give.
+        unit = _Unit(lo_b, hi_b)
+        lo = np.concatenate([lo_c, np.zeros(lo_b.size)])
+        hi = np.concatenate([hi_c, np.ones(hi_b.size)])
+        v0 = np.clip(np.concatenate([core.vector(), unit.to_unit(self.pack(blocks))]), lo, hi)
         n_total = sum(x.size for x in self.xs)
 
         def residuals(v: FloatArray) -> FloatArray:
             run = core.runner(v[:n_core], self.rate)
             if run is None:
                 return np.full(n_total, 1e3)
-            bl = self.unpack(v[n_core:])
+            bl = self.unpack(unit.from_unit(v[n_core:]))
             return np.concatenate(
                 [
                     (self.model._run(x, self.rate, run, bl) - y) * w
@@ -509,7 +560,7 @@ class _NonlinearFitter(_Fitter):
             if 2 * result.cost <= float(np.sum(residuals(v0) ** 2)):
                 v_best = result.x
         core.set_vector(v_best[:n_core])
-        return self.unpack(v_best[n_core:]), float(np.sum(residuals(v_best) ** 2))
+        return self.unpack(unit.from_unit(v_best[n_core:])), float(np.sum(residuals(v_best) ** 2))
 
 
 class _LinearFitter(_Fitter):
