@@ -35,10 +35,10 @@ def _data(config: PlantConfig) -> tuple[list, list]:
 # held out on this plant): (effect, plant settings, the parameter the diagnosis reports and
 # the plant's value of it). Measured held-out RMSE
 # DRDPI -> DRDPI + block, and the identified parameter:
-#   pneumatic_lag 0.2 s:    1.77 -> 0.74 deg (-58 %), 163 ms
-#   creep 30 %, 2 s:        1.25 -> 0.55 deg (-56 %), fraction 26.0 %
+#   pneumatic_lag 0.2 s:    1.77 -> 0.72 deg (-60 %), 159 ms (vents 1.11x slower)
+#   creep 30 %, 2 s:        1.25 -> 0.55 deg (-56 %), fraction 26.7 %
 #   drift 8.6 deg/min:      2.03 -> 0.82 deg (-59 %), 8.15 deg/min
-#   transport_delay 0.2 s:  2.28 -> 0.80 deg (-65 %), 152 ms (only with the fast-ramp signal
+#   transport_delay 0.2 s:  2.28 -> 0.80 deg (-65 %), 156 ms (only with the fast-ramp signal
 #       in the data: on 0.5-2 s ramps alone the DRDPI's rate-dependent play absorbed ~80 ms)
 #   tip_dynamics 2 Hz/0.05: 2.29 -> 1.07 deg (-53 %), 2.04 Hz   (a fixed-damping filter
 #       after the hysteresis reached only -40 %: the plant's tip rings freely when let go
