@@ -28,6 +28,7 @@ from numba import njit
 from scipy import signal as sps
 
 from catheter_models.errors import ParameterError
+from catheter_models.units import pa_to_bar
 
 FloatArray = npt.NDArray[np.float64]
 Side = Literal["input", "output"]
@@ -293,7 +294,7 @@ class PneumaticLag(Block):
         """(dt [s], fill and vent time constants [s], largest step a sample [bar])."""
         fill_s, vent_ratio, max_rate_pa_per_s = values
         dt_s = 1.0 / rate_hz
-        return dt_s, fill_s, fill_s * vent_ratio, max_rate_pa_per_s * 1e-5 * dt_s
+        return dt_s, fill_s, fill_s * vent_ratio, float(pa_to_bar(max_rate_pa_per_s)) * dt_s
 
     def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:
         """The muscle's pressure [bar]: the valve's through the lag."""
