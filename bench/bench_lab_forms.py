@@ -41,9 +41,9 @@ from foreign_plants import PLANTS  # noqa: E402
 from foreign_plants.cases import draw_case  # noqa: E402
 
 from catheter_models.lab import blocks as lab_blocks  # noqa: E402
-from catheter_models.lab.diagnose import _fit_change, _rmse_deg  # noqa: E402
 from catheter_models.lab.greybox import GreyBox  # noqa: E402
 from catheter_models.models.drdpi import DRDPI  # noqa: E402
+from catheter_models.models.evaluate import pooled_rmse  # noqa: E402
 
 
 def earlier_form(current: type[lab_blocks.Block]) -> type[lab_blocks.Block]:
@@ -77,12 +77,17 @@ def earlier_form(current: type[lab_blocks.Block]) -> type[lab_blocks.Block]:
     return Earlier
 
 
+def _deg(model: GreyBox, recordings: Sequence[Any]) -> float:
+    """Held-out (or training) RMSE in degrees."""
+    return float(np.degrees(pooled_rmse(model, recordings)))
+
+
 def run_case(job: tuple[str, str, str, int]) -> dict[str, Any]:
     """Fit the chain, then the block in both forms (and its rival); score them held out."""
     plant, hidden, effect, seed = job
     case = draw_case(PLANTS[plant], [hidden], seed)
     drdpi = DRDPI().fit([case.train], progress=False)
-    core = _fit_change(GreyBox.from_drdpi(drdpi), "core:free_pi", [case.train])
+    core = GreyBox.from_drdpi(drdpi).with_core("free_pi").fit([case.train], progress=False)
     row: dict[str, Any] = {
         "plant": plant,
         "hidden": hidden,
@@ -90,25 +95,26 @@ def run_case(job: tuple[str, str, str, int]) -> dict[str, Any]:
         "seed": seed,
         "effect": effect,
         "noise_true_deg": float(np.degrees(case.plant.noise_std_rad)),
-        "core_test_deg": _rmse_deg(core, [case.test]),
+        "core_test_deg": _deg(core, [case.test]),
     }
     current = lab_blocks.FORMS[effect]
     for name, form in (("current", current), ("earlier", earlier_form(current))):
         lab_blocks.FORMS[effect] = form  # type: ignore[index]  # this process only
         try:
             t0 = time.perf_counter()
-            fitted = _fit_change(core, effect, [case.train])
+            fitted = core.with_effect(effect).fit([case.train], progress=False)
             row[f"{name}_s"] = time.perf_counter() - t0
         finally:
             lab_blocks.FORMS[effect] = current  # type: ignore[index]
-        row[f"{name}_test_deg"] = _rmse_deg(fitted, [case.test])
-        row[f"{name}_train_deg"] = _rmse_deg(fitted, [case.train])
+        row[f"{name}_test_deg"] = _deg(fitted, [case.test])
+        row[f"{name}_train_deg"] = _deg(fitted, [case.train])
         names = [p.name for p in form.params]
         row[f"{name}_values"] = dict(zip(names, fitted.blocks_[effect], strict=True))
     rival = current.rival
     if rival:
         row["rival"] = rival
-        row["rival_test_deg"] = _rmse_deg(_fit_change(core, rival, [case.train]), [case.test])
+        rival_fit = core.with_effect(rival).fit([case.train], progress=False)
+        row["rival_test_deg"] = _deg(rival_fit, [case.test])
     print(
         f"{plant} {hidden} seed {seed}: core {row['core_test_deg']:.3f}, {effect} earlier "
         f"{row['earlier_test_deg']:.3f}, current {row['current_test_deg']:.3f} deg"

@@ -478,8 +478,8 @@ class _Fitter:
                 scored.sort(key=lambda t: t[0])
                 earliest = [scored[0][1]]
                 added = [i for i, p in enumerate(params) if p.absent is not None]
+                grids = [_grid(params[i], len(params)) for i in added]
                 for _, point in scored[:STARTS]:
-                    grids = [_grid(params[i], len(params)) for i in added]
                     for combo_added in itertools.product(*grids):
                         values = list(point[e])
                         for i, v in zip(added, combo_added, strict=True):
