@@ -283,23 +283,27 @@ def test_killed_launcher_takes_its_graph_down_cleanly(
     csv = tmp_path / "hold.csv"
     csv.write_text("t_s,angle_deg\n" + "".join(f"{t},{a}\n" for t, a in HOLD_20_DEG))
     out = tmp_path / "run"
-    launcher = children.start(
-        "follow_trajectory",
-        [
-            sys.executable,
-            "-m",
-            "catheter_control.follow_trajectory",
-            "--sim",
-            "--file",
-            str(csv),
-            "--out",
-            str(out),
-            "--no-progress",
-        ],
-    )
+    # The probe joins the domain before the graph starts, as in every other graph test: joined
+    # while the run started, it was followed by ~333 ms in which no node received anything,
+    # and the compensator stopped on its stale limit before the launcher could be killed
+    # (docs/reliability.md, "A participant joining while a run starts").
     with Probe(children.domain_id) as probe:
         commands = probe.subscribe(FluidPressure, PRESSURE_COMMAND.name, RECORD)
         measured = probe.subscribe(FluidPressure, PRESSURE_MEASURED.name, RECORD)
+        launcher = children.start(
+            "follow_trajectory",
+            [
+                sys.executable,
+                "-m",
+                "catheter_control.follow_trajectory",
+                "--sim",
+                "--file",
+                str(csv),
+                "--out",
+                str(out),
+                "--no-progress",
+            ],
+        )
         # Both subscriptions must have matched: under load the probe's command subscription
         # once matched after its measured one, and the run was judged with no command seen.
         assert probe.spin_until(
@@ -343,16 +347,18 @@ def test_a_run_stopped_part_way_is_not_reported_as_a_success(
     csv.write_text("t_s,angle_deg\n" + "".join(f"{t},{a}\n" for t, a in HOLD_20_DEG))
     out = tmp_path / "run"
     argv = [sys.executable, "-m", "catheter_control.follow_trajectory", "--sim"]
-    launcher = subprocess.Popen(
-        [*argv, "--file", str(csv), "--out", str(out), "--no-progress"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        env=children.full_env(),
-    )
+    launcher: subprocess.Popen[str] | None = None
     try:
+        # The probe joins before the graph starts (see the killed-launcher test above).
         with Probe(children.domain_id) as probe:
             measured = probe.subscribe(FluidPressure, PRESSURE_MEASURED.name, RECORD)
+            launcher = subprocess.Popen(
+                [*argv, "--file", str(csv), "--out", str(out), "--no-progress"],
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                text=True,
+                env=children.full_env(),
+            )
             assert probe.spin_until(
                 lambda: len(measured) > 25 and gauge_pa(measured[-25:]).mean() > 1.5e5, 60.0
             )
@@ -363,8 +369,9 @@ def test_a_run_stopped_part_way_is_not_reported_as_a_success(
         os.kill(rig, signal.SIGKILL)
         _, stderr = launcher.communicate(timeout=30.0)
     finally:
-        if launcher.poll() is None:
+        if launcher is not None and launcher.poll() is None:
             launcher.kill()
+    assert launcher is not None
     fault.safe_after(time.monotonic() - t_kill)  # until the user has the answer
     print(stderr.strip())
     fault.check("exit code 4", launcher.returncode == 4, f"exit code {launcher.returncode}")
