@@ -46,7 +46,6 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 import onnx
-import onnxruntime as ort
 import torch
 from bench_plant import _machine
 from onnx import numpy_helper
@@ -67,6 +66,7 @@ from catheter_models.models.lstm import (
     session_options,
 )
 from catheter_models.models.lstm_train import StreamingNet, WindowedNet, export_onnx
+from catheter_models.onnx_runtime import ort
 from catheter_models.signals import get_preset
 
 RESULTS_DIR = Path(__file__).resolve().parent / "results"

@@ -45,7 +45,6 @@ from typing import Any, ClassVar, Final, Literal, Self
 
 import numpy as np
 import numpy.typing as npt
-import onnxruntime as ort
 
 from catheter_models.errors import ParameterError
 from catheter_models.model_dir import Manifest, ModelDirError
@@ -62,6 +61,7 @@ from catheter_models.models.base import (
     as_input,
     check_finite_step,
 )
+from catheter_models.onnx_runtime import ort
 
 Form = Literal["streaming", "windowed"]
 ValidationSplit = Literal["recordings", "time"]
