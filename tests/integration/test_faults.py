@@ -412,7 +412,7 @@ def _pressurised_run(
             if pressurised():
                 return launcher, run_dir
             raise AssertionError("the run did not reach 1.5 bar within 60 s")
-        launcher.wait(30.0)
+        launcher.communicate(timeout=30.0)  # also drains and closes its pipes, if it has any
         report = run_dir / "report.json"
         stopped = json.loads(report.read_text()).get("stopped", "") if report.exists() else ""
         if attempt == 2 or launcher.returncode != 4 or "stale" not in stopped:
