@@ -147,6 +147,11 @@ class SimGraph:
         wait_for_recorder(
             self.probe, [qualify(PRESSURE_MEASURED), qualify(TIP_ANGLE)], timeout_s=30.0
         )
+        # The probe's own stream too: "nothing moved" is judged on what it received, and once
+        # it had received nothing yet when the refusals were over (an empty array, no verdict).
+        assert self.probe.spin_until(lambda: len(self.measured) > 0, 30.0), (
+            f"the probe received no {PRESSURE_MEASURED.name}:\n{self.children.all_logs()}"
+        )
 
     def bend_and_hold(self) -> None:
         """Send the 20 deg hold; return once the line holds about 2 bar."""
