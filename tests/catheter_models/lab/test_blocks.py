@@ -86,6 +86,13 @@ def test_a_creep_saved_before_its_spread_existed_loads_as_one_lag() -> None:
     assert BLOCKS["creep"].check({"fraction": 0.2, "time_constant_s": 1.5}) == [0.2, 1.5, 1.0]
 
 
+def test_a_slow_fill_passes_a_share_of_a_step_at_once_and_the_rest_over_its_time() -> None:
+    y = block("slow_fill").apply(step(), RATE_HZ, [0.2, 0.1])
+    assert y[250] == pytest.approx(0.8 + 0.2 * (1 - math.exp(-1 / 25)), abs=1e-9)
+    assert y[250 + 24] == pytest.approx(0.8 + 0.2 * (1 - math.exp(-1)), abs=1e-9)
+    assert y[-1] == pytest.approx(1.0, abs=1e-6)
+
+
 def test_tip_dynamics_ring_at_the_natural_frequency() -> None:
     y = block("tip_dynamics").apply(step(), RATE_HZ, [5.0, 0.05, 0.0])
     ripple = y[260:] - 1.0
@@ -212,6 +219,7 @@ STREAM_VALUES = {
     "creep": [0.3, 1.2, 6.0],
     "tip_dynamics": [6.3, 0.07, 2.0],
     "drift": [math.radians(5.0) / 60.0, 3.3],  # below its bound: the signal sees it settle
+    "slow_fill": [0.2, 1.7],
     "output_lag": [0.05],
 }
 

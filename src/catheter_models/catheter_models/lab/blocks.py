@@ -399,6 +399,7 @@ class Creep(Block):
     primary = "fraction"
     needs = "plateaus of at least a second after pressure steps"
     staged_search = True
+    rival = "slow_fill"
 
     @staticmethod
     def _branches(values: Sequence[float]) -> tuple[float, float, float]:
@@ -729,13 +730,47 @@ class OutputLag(Block):
         return _Lowpass1Stream(rate_hz, values[0]).step
 
 
+class SlowFill(Block):
+    """A share of the pressure through a slow lag, before the core: not in the catalogue.
+
+    A second chamber behind a small orifice, or a leak, fills for seconds after the muscle
+    has: the bend keeps moving on a plateau as it does under creep, but the slow share
+    passes through the hysteresis (its knee and saturation) rather than following the bend.
+    The diagnosis fits it only as the rival of :class:`Creep` (which side of the core the
+    slow part is on); a person may add it to a chain by hand.
+    """
+
+    effect = "slow_fill"
+    side: ClassVar[Side] = "input"
+    params = (
+        BlockParam(
+            "fraction", "1", 0.0, 0.5, 0.1, "share of the pressure that fills slowly", 100.0, "%"
+        ),
+        BlockParam("time_constant_s", "s", 0.1, 30.0, 1.5, "slow share's time constant"),
+    )
+    primary = "fraction"
+    needs = "plateaus of at least a second after pressure steps"
+
+    def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:
+        """The pressure [bar] with ``fraction`` of it through the slow lag."""
+        fraction, tau = values
+        out: FloatArray = (1.0 - fraction) * x + fraction * _lowpass1(x, rate_hz, tau)
+        return out
+
+    def streamer(self, rate_hz: float, values: Sequence[float]) -> Step:
+        """The slow fill, one sample at a time."""
+        fraction, tau = values
+        lag = _Lowpass1Stream(rate_hz, tau).step
+        return lambda x: (1.0 - fraction) * x + fraction * lag(x)
+
+
 BLOCKS: Final[Mapping[str, type[Block]]] = {
     b.effect: b for b in (TransportDelay, PneumaticLag, Creep, TipDynamics, Drift)
 }
 """The catalogue: blocks by effect name, in chain order within each side. A diagnosis tries
 and names these."""
 
-CHECKS: Final[Mapping[str, type[Block]]] = {b.effect: b for b in (OutputLag,)}
+CHECKS: Final[Mapping[str, type[Block]]] = {b.effect: b for b in (SlowFill, OutputLag)}
 """Forms outside the catalogue: a diagnosis fits them only as a block's :attr:`Block.rival`,
 and never names them."""
 
