@@ -7,9 +7,10 @@ that a new form is judged in one run beside the old. Each case is a foreign plan
 2 minutes held out. The chain is what the lab's loop reaches first on these plants, the
 ``free_pi`` core fitted on the training recording; the block is then refitted on it.
 
-Where the block has a rival on the core's other side (the pneumatic lag's ``output_lag``),
-the rival is fitted too: a more flexible block must not win where the effect is the rival's
-(``--hidden sensor_lag`` is the case to check).
+Where the block has a rival on the core's other side (the pneumatic lag's ``output_lag``,
+creep's ``slow_fill``), the rival is fitted too: a more flexible block must not win where the
+effect is the rival's (``--hidden sensor_lag`` and ``--hidden slow_lag`` are the cases to
+check).
 
     NUMBA_NUM_THREADS=1 .venv/bin/python bench/bench_lab_forms.py --effect pneumatic_lag \\
         --hidden pneumatic_lag --seeds 2 3 4 --jobs 2
