@@ -234,6 +234,25 @@ def test_each_block_streams_what_it_applies(effect: str) -> None:
     np.testing.assert_allclose(streamed, block(effect).apply(x, RATE_HZ, values), atol=1e-9)
 
 
+@pytest.mark.parametrize(
+    "effect", [e for e, b in FORMS.items() if b.side == "output" and e != "tip_dynamics"]
+)
+def test_an_output_block_on_the_core_s_columns_is_the_block_on_their_sum(effect: str) -> None:
+    # The fit solves the core's weights through the block's column form; a model predicts
+    # through its plain form. They must agree, or the weights fitted are not the model's.
+    rng = np.random.default_rng(5)
+    m = np.cumsum(rng.normal(0.0, 0.3, (1500, 4)), axis=0)
+    m[:, -1] = 0.0  # the running offset's column
+    w = np.array([0.7, -1.3, 2.0])
+    values = STREAM_VALUES[effect]
+    b = block(effect)
+    reference = m[:, :-1] @ w
+    cols = b.apply_columns(m, RATE_HZ, values, reference)
+    np.testing.assert_allclose(
+        cols[:, :-1] @ w + cols[:, -1], b.apply(reference, RATE_HZ, values), atol=1e-9
+    )
+
+
 @pytest.mark.parametrize("core", ["drdpi", "free_pi", "boucwen", "gpi"])
 def test_a_greybox_with_every_block_streams_its_prediction(core: str, drdpi_and_data) -> None:
     drdpi, recs = drdpi_and_data
