@@ -302,25 +302,44 @@ def main(argv: list[str] | None = None) -> int:
         "lab_foreign.quick.json" if args.quick else "lab_foreign.json"
     )
     t0 = time.perf_counter()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    rows: list[dict[str, Any]] = []
+
+    def save(partial: bool) -> None:
+        # Written after every case: a grid takes about an hour, and a run cut short keeps
+        # what it measured (marked partial).
+        result = {
+            "rows": rows,
+            "table": table(rows),
+            "confusion": confusion(rows),
+            "seconds": time.perf_counter() - t0,
+            "machine": _machine(),
+            "unix_time_s": time.time(),
+            "partial": partial,
+        }
+        out.write_text(json.dumps(result, indent=2, default=float) + "\n")
+
+    def done(row: dict[str, Any]) -> None:
+        rows.append(row)
+        print(
+            f"[{len(rows)}/{len(jobs)}] {row['plant']} {'+'.join(row['hidden']) or 'nothing'}: "
+            f"{row['changes']} -> {row['verdict']} ({row['seconds']:.0f} s)",
+            flush=True,
+        )
+        save(partial=len(rows) < len(jobs))
+
     if args.jobs == 1:
         # One case at a time, its refits spread over the cores: what a user's diagnose does,
         # so the speed columns are the user's (a pool's workers cannot start processes).
-        rows = [run_case((*job, 0)) for job in jobs]
+        for job in jobs:
+            done(run_case((*job, 0)))
     else:
         with multiprocessing.get_context("spawn").Pool(args.jobs) as pool:
-            rows = pool.map(run_case, [(*job, 1) for job in jobs], chunksize=1)
+            for row in pool.imap(run_case, [(*job, 1) for job in jobs], chunksize=1):
+                done(row)
     print()
     print(summary(rows))
-    result = {
-        "rows": rows,
-        "table": table(rows),
-        "confusion": confusion(rows),
-        "seconds": time.perf_counter() - t0,
-        "machine": _machine(),
-        "unix_time_s": time.time(),
-    }
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2, default=float) + "\n")
+    save(partial=False)
     print(f"\nwrote {out}")
     return 0
 
