@@ -372,26 +372,39 @@ def test_a_drift_block_is_named_for_an_offset_drift_not_for_a_gain_drift(
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    ("plant", "hidden", "seed", "named"),
-    [("maxwell_slip", "sensor_lag", 12, False), ("boucwen", "pneumatic_lag", 11, True)],
+    ("plant", "hidden", "seed", "answer"),
+    [
+        ("maxwell_slip", "sensor_lag", 12, "withheld"),
+        ("boucwen", "pneumatic_lag", 11, "named"),
+        ("boucwen", "sensor_lag", 4, "named, side not certain"),
+    ],
 )
 def test_a_lag_is_named_pneumatic_only_where_it_is_before_the_core(
-    plant: str, hidden: str, seed: int, named: bool
+    plant: str, hidden: str, seed: int, answer: str
 ) -> None:
     # Development seeds. A lag in the laser's filter (outside the catalogue) removes much of
-    # the same error as one in the tube; only the side of the hysteresis tells them apart.
+    # the same error as one in the tube; only the side of the hysteresis tells them apart,
+    # and where its rival fits about as well (Bouc-Wen, seed 4: 0.366 against 0.356 deg) the
+    # data cannot: the name stands, and the report says the side is not certain.
     case = draw_case(PLANTS[plant], [hidden], seed)
     model = GreyBox(core="free_pi").fit([case.train], progress=False)
     result = diagnose(
         model, [case.train], [case.test], effects=["pneumatic_lag"], cores=[], reference=False
     )
-    print(result.text())
+    text = result.text()
+    print(text)
     (lag,) = result.candidates
     assert lag.measured_reduction > 0.3  # it removes error either way...
-    assert lag.significant is named  # ...but is named only where it sits
-    if not named:
+    assert lag.significant is answer.startswith("named")  # ...but is named only where it sits
+    uncertain = "which side is not certain: output_lag (on the core's output side)"
+    if answer == "withheld":
         assert result.verdict == "unexplained"
-        assert "output_lag (on the core's output side) fits better" in result.text()
+        assert "output_lag (on the core's output side) fits better" in text
+    elif answer == "named":
+        assert result.verdict == "add pneumatic_lag" and uncertain not in text
+    else:
+        assert result.verdict == "add pneumatic_lag"
+        assert lag.caveats and f"    but: {uncertain}" in text  # beside the verdict itself
 
 
 @pytest.mark.slow

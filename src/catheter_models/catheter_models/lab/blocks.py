@@ -95,6 +95,9 @@ class Block(ABC):
     flow limit): a joint grid as fine as the earlier form's would cost their product, and a
     coarse one misses the earlier form's own optimum. Not where the parameters trade against
     each other (a drift's settle time against its rate)."""
+    stands_for: ClassVar[str] = ""
+    """For a form outside the catalogue: what physical thing it stands for, in a person's
+    words (said where it fits about as well as the catalogue block it rivals)."""
     rival: ClassVar[str] = ""
     """A form outside the catalogue (:data:`CHECKS`) that gives the same signature from the
     core's other side. Where it fits the held-out data clearly better, the effect is not
@@ -736,6 +739,7 @@ class OutputLag(Block):
 
     effect = "output_lag"
     side: ClassVar[Side] = "output"
+    stands_for = "the sensor's own filter, or a bend that follows its muscle slowly"
     params = (
         BlockParam("time_constant_s", "s", 0.002, 0.5, 0.03, "lag of bend behind core", 1e3, "ms"),
     )
@@ -769,6 +773,7 @@ class SlowFill(Block):
 
     effect = "slow_fill"
     side: ClassVar[Side] = "input"
+    stands_for = "a second chamber behind a small orifice, or a leak"
     params = (
         BlockParam(
             "fraction", "1", 0.0, 0.5, 0.1, "share of the pressure that fills slowly", 100.0, "%"
