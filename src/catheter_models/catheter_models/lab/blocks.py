@@ -213,6 +213,15 @@ def _lagged_columns(
     return out
 
 
+def _lagged(
+    x: FloatArray, rate_hz: float, time_constants_s: Sequence[float], fraction: float
+) -> FloatArray:
+    """:func:`_lagged_columns` on one signal: the share ``fraction`` through the lags."""
+    return _lagged_columns(
+        np.asarray(x, dtype=float)[:, None], rate_hz, time_constants_s, fraction
+    )[:, 0]
+
+
 class _Lowpass1Stream:
     """:func:`_lowpass1` one sample at a time (the first sample is the rest it starts from)."""
 
@@ -449,9 +458,7 @@ class Creep(Block):
     def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:
         """The bend [deg] with ``fraction`` of every change delayed by the two slow lags."""
         fraction, fast, slow = self._branches(values)
-        creeping = 0.5 * (_lowpass1(x, rate_hz, fast) + _lowpass1(x, rate_hz, slow))
-        out: FloatArray = (1.0 - fraction) * x + fraction * creeping
-        return out
+        return _lagged(x, rate_hz, (fast, slow), fraction)
 
     def apply_columns(
         self, m: FloatArray, rate_hz: float, values: Sequence[float], reference: FloatArray
@@ -786,8 +793,7 @@ class SlowFill(Block):
     def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:
         """The pressure [bar] with ``fraction`` of it through the slow lag."""
         fraction, tau = values
-        out: FloatArray = (1.0 - fraction) * x + fraction * _lowpass1(x, rate_hz, tau)
-        return out
+        return _lagged(x, rate_hz, (tau,), fraction)
 
     def streamer(self, rate_hz: float, values: Sequence[float]) -> Step:
         """The slow fill, one sample at a time."""

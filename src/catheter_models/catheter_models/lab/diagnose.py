@@ -848,6 +848,7 @@ def _diagnose(
                     f"{rmse_test_new:.3f}): {FORMS[rival].stands_for} would look the same"
                 )
         removes = _removes_enough(measured, expected, min_reduction)
+        significant = removes and not doubts
         candidates.append(
             Candidate(
                 effect=e,
@@ -859,10 +860,10 @@ def _diagnose(
                 expected_reduction=expected,
                 measured_reduction=measured,
                 evidence=report.by_name(EVIDENCE_TEST[e]).evidence(),
-                significant=removes and not doubts,
+                significant=significant,
                 regime_reduction=in_regime,
                 doubts=doubts if removes else [],
-                caveats=caveats if removes and not doubts else [],
+                caveats=caveats if significant else [],
                 model=fitted,
             )
         )
