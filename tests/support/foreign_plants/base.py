@@ -111,6 +111,16 @@ class Effect:
         return f"{self.name}({inner})"
 
 
+class PlantStepper(ABC):
+    """A foreign plant run one sample at a time from rest, so a controller can close its loop
+    through it. Stepping a command through it gives exactly what ``simulate`` gives for the
+    whole command with the same effects and seed (a test checks)."""
+
+    @abstractmethod
+    def step(self, pressure_command_pa: float) -> float:
+        """Hold ``pressure_command_pa`` [Pa] for one sample; the measured bend [rad] at its end."""
+
+
 class ForeignPlant(ABC):
     """A simulated catheter with its own physics. Subclasses set the class attributes.
 
@@ -145,3 +155,9 @@ class ForeignPlant(ABC):
     ) -> FloatArray:
         """The measured bend [rad] at each command sample, starting from rest (vented,
         straight). ``seed`` fixes the sensor noise; the same call gives the same output."""
+
+    @abstractmethod
+    def stepper(
+        self, rate_hz: float, effects: Sequence[Effect] = (), seed: int = 0
+    ) -> PlantStepper:
+        """The plant of :meth:`simulate`, from rest, one command sample at a time."""

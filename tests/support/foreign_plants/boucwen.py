@@ -58,7 +58,7 @@ import numpy as np
 import scipy.linalg
 from numba import njit
 
-from .base import Effect, FloatArray, ForeignPlant
+from .base import Effect, FloatArray, ForeignPlant, PlantStepper
 
 P_MAX_PA: Final = 3.0e5
 """Top of the valve's range (commands above are clipped)."""
@@ -262,6 +262,19 @@ def _step2(lin: FloatArray, row: int, state: FloatArray, u: float) -> float:
     return y
 
 
+# Layout of the kernel's resumable state: scalars, then the line, the four second-order
+# links' states and the creep bank's terms.
+_S_P, _S_P2, _S_X_PREV, _S_ZETA, _S_THETA, _S_YB = range(6)
+_S_LINE, _S_MODE1, _S_MODE2, _S_LASER = 6, 8, 10, 12
+_S_CREEP = 14
+
+
+@njit(cache=True)
+def _fresh_state(n_creep: int) -> FloatArray:
+    """The kernel's state at rest (vented, straight)."""
+    return np.zeros(_S_CREEP + n_creep)
+
+
 @njit(cache=True)
 def _simulate_kernel(
     cmd: FloatArray, pars: FloatArray, creep: FloatArray, lin: FloatArray
@@ -274,9 +287,29 @@ def _simulate_kernel(
         creep: Per-sub-step decay factors (row 0) and weights (row 1) of the creep bank.
         lin: Exact sub-step matrices of the second-order links (``_LIN_*`` rows).
     """
+    out = np.empty(cmd.size)
+    _advance(cmd, 0, pars, creep, lin, _fresh_state(creep.shape[1]), out)
+    return out
+
+
+@njit(cache=True)
+def _advance(  # noqa: PLR0917 - numba compiles positional arguments only
+    cmd: FloatArray,
+    k_start: int,
+    pars: FloatArray,
+    creep: FloatArray,
+    lin: FloatArray,
+    state: FloatArray,
+    out: FloatArray,
+) -> None:
+    """Integrate samples ``k_start`` to the end of ``cmd`` from ``state`` (updated in place).
+
+    ``cmd`` holds every command since rest (the delay line reads back into it); sample k's
+    bend goes to ``out[k - k_start]``. Two calls on consecutive spans give what one call on
+    both gives, which lets a controller close the loop one sample at a time.
+    """
     pp = pars
     n = cmd.size
-    out = np.empty(n)
     rate_hz = pars[_RATE_HZ]
     substeps = int(pars[_SUBSTEPS])
     delay_s = pars[_DELAY_S]
@@ -307,18 +340,19 @@ def _simulate_kernel(
     for i in range(n_creep):
         creep_total += creep[1, i]
 
-    p = 0.0
-    p2 = 0.0
-    line = np.zeros(2)
-    x_prev = 0.0
-    zeta = 0.0
-    theta = 0.0
-    yb = 0.0
-    c = np.zeros(n_creep)
-    mode1 = np.zeros(2)
-    mode2 = np.zeros(2)
-    laser = np.zeros(2)
-    for k in range(n):
+    p = state[_S_P]
+    p2 = state[_S_P2]
+    line = state[_S_LINE : _S_LINE + 2]
+    x_prev = state[_S_X_PREV]
+    zeta = state[_S_ZETA]
+    theta = state[_S_THETA]
+    yb = state[_S_YB]
+    c = state[_S_CREEP : _S_CREEP + n_creep]
+    mode1 = state[_S_MODE1 : _S_MODE1 + 2]
+    mode2 = state[_S_MODE2 : _S_MODE2 + 2]
+    laser = state[_S_LASER : _S_LASER + 2]
+    y = 0.0
+    for k in range(k_start, n):
         for j in range(substeps):
             t = (k * substeps + j) * dt
             # Command at the muscle end of the line (zero-order hold of the samples).
@@ -388,8 +422,13 @@ def _simulate_kernel(
                 ) + SECOND_MODE_SHARE * _step2(lin, _LIN_MODE2, mode2, y)
             if on_sensor:
                 y = _step2(lin, _LIN_SENSOR, laser, y)
-        out[k] = y
-    return out
+        out[k - k_start] = y
+    state[_S_P] = p
+    state[_S_P2] = p2
+    state[_S_X_PREV] = x_prev
+    state[_S_ZETA] = zeta
+    state[_S_THETA] = theta
+    state[_S_YB] = yb
 
 
 class BoucWenPlant(ForeignPlant):
@@ -454,12 +493,24 @@ class BoucWenPlant(ForeignPlant):
         effects: Sequence[Effect] = (),
     ) -> FloatArray:
         """The bend [rad] the laser would report without its noise and quantisation."""
-        if not rate_hz > 0.0 or not math.isfinite(rate_hz):
-            raise ValueError(f"rate_hz must be positive, got {rate_hz}")
         cmd = np.asarray(pressure_command_pa, dtype=np.float64).reshape(-1)
         if not np.all(np.isfinite(cmd)):
             raise ValueError("pressure command contains non-finite values")
         cmd = np.ascontiguousarray(np.clip(cmd, 0.0, P_MAX_PA))
+        run = self._run(rate_hz, effects)
+        bend = _simulate_kernel(cmd, run.pars, run.creep, run.lin)
+        return bend + run.drift_rad(np.arange(1, cmd.size + 1) / rate_hz)
+
+    def _measure(self, bend: FloatArray, rng: np.random.Generator) -> FloatArray:
+        """The laser: white noise, then quantisation."""
+        noise = rng.standard_normal(bend.size)
+        measured = bend + math.radians(self.params.noise_deg) * noise
+        return np.asarray(np.round(measured / QUANTUM_RAD) * QUANTUM_RAD)
+
+    def _run(self, rate_hz: float, effects: Sequence[Effect]) -> _Run:
+        """The kernel's inputs for a run at ``rate_hz`` with ``effects``."""
+        if not rate_hz > 0.0 or not math.isfinite(rate_hz):
+            raise ValueError(f"rate_hz must be positive, got {rate_hz}")
         by_name: dict[str, Effect] = {}
         for effect in effects:
             if effect.name in by_name:
@@ -509,12 +560,7 @@ class BoucWenPlant(ForeignPlant):
         lin = np.zeros((len(links), 2, 3))
         for row, (w, z) in links.items():
             lin[row, :, :2], lin[row, :, 2] = _second_order_zoh(w, z, dt)
-        bend = _simulate_kernel(cmd, pars, creep, lin)
-        if "drift" in by_name:
-            bend = bend + drift_offset_rad(
-                par("drift", "rate_deg_per_min", 0.0), np.arange(1, cmd.size + 1) / rate_hz
-            )
-        return bend
+        return _Run(pars, creep, lin, par("drift", "rate_deg_per_min", 0.0))
 
     def simulate(
         self,
@@ -525,9 +571,63 @@ class BoucWenPlant(ForeignPlant):
     ) -> FloatArray:
         """Measured bend [rad] for a pressure command [Pa], from rest (see module doc)."""
         bend = self.bend_without_noise(pressure_command_pa, rate_hz, effects)
-        noise = np.random.default_rng(seed).standard_normal(bend.size)
-        measured = bend + math.radians(self.params.noise_deg) * noise
-        return np.round(measured / QUANTUM_RAD) * QUANTUM_RAD
+        return self._measure(bend, np.random.default_rng(seed))
+
+    def stepper(
+        self, rate_hz: float, effects: Sequence[Effect] = (), seed: int = 0
+    ) -> PlantStepper:
+        """This plant from rest, one command sample at a time (see :class:`PlantStepper`)."""
+        return _BoucWenStepper(self, self._run(rate_hz, effects), rate_hz, seed)
+
+
+@dataclass(frozen=True)
+class _Run:
+    """The kernel's inputs for one run, and the drift added to its output."""
+
+    pars: FloatArray
+    creep: FloatArray
+    lin: FloatArray
+    drift_deg_per_min: float
+
+    def drift_rad(self, t_s: FloatArray) -> FloatArray:
+        """The drift's offset [rad] at the sample times ``t_s`` (zero without drift)."""
+        if self.drift_deg_per_min == 0.0:
+            return np.zeros_like(t_s)
+        return drift_offset_rad(self.drift_deg_per_min, t_s)
+
+
+class _BoucWenStepper(PlantStepper):
+    """Carries the kernel's state, and every command so far (the delay line reads back)."""
+
+    def __init__(self, plant: BoucWenPlant, run: _Run, rate_hz: float, seed: int) -> None:
+        self._plant = plant
+        self._run = run
+        self._rate_hz = rate_hz
+        self._state = _fresh_state(run.creep.shape[1])
+        self._rng = np.random.default_rng(seed)
+        self._cmd = np.zeros(1024)
+        self._k = 0
+        self._out = np.zeros(1)
+
+    def step(self, pressure_command_pa: float) -> float:
+        if not math.isfinite(pressure_command_pa):
+            raise ValueError("pressure command contains non-finite values")
+        if self._k == self._cmd.size:
+            self._cmd = np.concatenate([self._cmd, np.zeros(self._cmd.size)])
+        self._cmd[self._k] = min(max(pressure_command_pa, 0.0), P_MAX_PA)
+        k = self._k
+        self._k += 1
+        _advance(
+            self._cmd[: k + 1],
+            k,
+            self._run.pars,
+            self._run.creep,
+            self._run.lin,
+            self._state,
+            self._out,
+        )
+        bend = self._out + self._run.drift_rad(np.array([(k + 1) / self._rate_hz]))
+        return float(self._plant._measure(bend, self._rng)[0])
 
 
 def drift_offset_rad(rate_deg_per_min: float, t_s: FloatArray) -> FloatArray:

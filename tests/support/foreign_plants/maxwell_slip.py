@@ -66,7 +66,7 @@ import numpy as np
 from numba import njit
 from scipy.optimize import brentq
 
-from .base import Effect, FloatArray, ForeignPlant
+from .base import Effect, FloatArray, ForeignPlant, PlantStepper
 
 P_ATM_PA: Final = 101_325.0
 P_MAX_PA: Final = 3.0e5
@@ -152,6 +152,32 @@ def _elastic(x_e: float, k0: float, x_lim: float, x_stiff: float) -> tuple[float
     return k0 * x_e + k0 * x_stiff * (eu - math.exp(u0)), k0 * (1.0 + eu)
 
 
+# Layout of the kernel's resumable state: scalars first, then the sliders, the creep
+# dashpots and the delay ring (sized by the run's parameters).
+(
+    _S_P_VALVE,
+    _S_P_MUSCLE,
+    _S_P_SLOW,
+    _S_X,
+    _S_VEL,
+    _S_CREEP_RELIEF,
+    _S_TH_BACK,
+    _S_TH_TIP,
+    _S_OM_TIP,
+    _S_OFFSET,
+    _S_Y_SENSOR,
+    _S_STEP,
+    _S_I_RING,
+    _N_SCALARS,
+) = range(14)
+
+
+@njit(cache=True)
+def _fresh_state(par: np.ndarray, n_el: int) -> np.ndarray:
+    """The state at rest (vented, straight) for a run with parameters ``par``."""
+    return np.zeros(_N_SCALARS + n_el + 3 + max(int(par[_DELAY_STEPS]), 1))
+
+
 @njit(cache=True)
 def _kernel(cmd_pa: np.ndarray, par: np.ndarray, k_el: np.ndarray, f_el: np.ndarray) -> np.ndarray:
     """Integrate the plant from rest: the noise-free measured bend and the muscle pressure.
@@ -160,11 +186,30 @@ def _kernel(cmd_pa: np.ndarray, par: np.ndarray, k_el: np.ndarray, f_el: np.ndar
     sub-steps of ``par[_DT]``; the output of sample k is the state at the end of that hold.
     Returns a (2, n) array: bend [rad], muscle pressure [Pa].
     """
+    state = _fresh_state(par, k_el.size)
+    out = np.zeros((2, cmd_pa.size))
+    _advance(cmd_pa, par, k_el, f_el, state, out)
+    return out
+
+
+@njit(cache=True)
+def _advance(  # noqa: PLR0917 - numba compiles positional arguments only
+    cmd_pa: np.ndarray,
+    par: np.ndarray,
+    k_el: np.ndarray,
+    f_el: np.ndarray,
+    state: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """Integrate ``cmd_pa`` from ``state`` (updated in place), writing ``out`` (2, n).
+
+    Resumable: two calls on the halves of a command give what one call on the whole gives,
+    which lets a controller close the loop one sample at a time.
+    """
     n_sub = int(par[_N_SUB])
     dt_s = par[_DT]
-    out = np.zeros((2, cmd_pa.size))
     n_el = k_el.size
-    z = np.zeros(n_el)
+    z = state[_N_SCALARS : _N_SCALARS + n_el]
     p_open = par[_P_OPEN]
     p_knee = par[_P_KNEE]
     area = par[_AREA]
@@ -189,8 +234,8 @@ def _kernel(cmd_pa: np.ndarray, par: np.ndarray, k_el: np.ndarray, f_el: np.ndar
     a_valve = 1.0 - math.exp(-dt_s / par[_TAU_VALVE])
     # Transport delay: a ring buffer of the command, one slot per sub-step of dead time.
     n_delay = int(par[_DELAY_STEPS])
-    ring = np.zeros(max(n_delay, 1))
-    i_ring = 0
+    ring = state[_N_SCALARS + n_el + 3 :]
+    i_ring = int(state[_S_I_RING])
     pneu_c = par[_PNEU_C]
     # Creep: Maxwell branches of stiffness creep_k [N/m]; creep_u is each dashpot's travel.
     creep_k = np.array([par[_CREEP_K0], par[_CREEP_K1], par[_CREEP_K2]])
@@ -200,7 +245,7 @@ def _kernel(cmd_pa: np.ndarray, par: np.ndarray, k_el: np.ndarray, f_el: np.ndar
         creep_a[0] = 1.0 - math.exp(-dt_s / par[_CREEP_T0])
         creep_a[1] = 1.0 - math.exp(-dt_s / par[_CREEP_T1])
         creep_a[2] = 1.0 - math.exp(-dt_s / par[_CREEP_T2])
-    creep_u = np.zeros(3)
+    creep_u = state[_N_SCALARS + n_el : _N_SCALARS + n_el + 3]
     tip_wn = par[_TIP_WN]
     tip_on = tip_wn > 0.0
     tip_c = 2.0 * par[_TIP_ZETA] * tip_wn
@@ -217,18 +262,19 @@ def _kernel(cmd_pa: np.ndarray, par: np.ndarray, k_el: np.ndarray, f_el: np.ndar
     slow_frac = par[_SLOW_FRAC]
     a_slow = 1.0 - math.exp(-dt_s / par[_SLOW_TAU]) if slow_frac > 0.0 else 0.0
 
-    p_valve = 0.0
-    p_muscle = 0.0
-    p_slow = 0.0
-    x = 0.0
-    vel = 0.0
-    creep_relief = 0.0  # sum of k_j u_j: force the relaxed branches no longer carry [N]
-    th_back = 0.0
-    th_tip = 0.0
-    om_tip = 0.0
-    offset = 0.0
-    y_sensor = 0.0
-    step = 0
+    p_valve = state[_S_P_VALVE]
+    p_muscle = state[_S_P_MUSCLE]
+    p_slow = state[_S_P_SLOW]
+    x = state[_S_X]
+    vel = state[_S_VEL]
+    # Sum of k_j u_j: the force the relaxed creep branches no longer carry [N].
+    creep_relief = state[_S_CREEP_RELIEF]
+    th_back = state[_S_TH_BACK]
+    th_tip = state[_S_TH_TIP]
+    om_tip = state[_S_OM_TIP]
+    offset = state[_S_OFFSET]
+    y_sensor = state[_S_Y_SENSOR]
+    step = int(state[_S_STEP])
     for k in range(cmd_pa.size):
         u = min(max(cmd_pa[k], 0.0), P_MAX_PA)
         if not math.isfinite(u):
@@ -347,7 +393,19 @@ def _kernel(cmd_pa: np.ndarray, par: np.ndarray, k_el: np.ndarray, f_el: np.ndar
             y_sensor += (th_tip + offset - y_sensor) * a_sensor
         out[0, k] = y_sensor
         out[1, k] = p_muscle
-    return out
+    state[_S_P_VALVE] = p_valve
+    state[_S_P_MUSCLE] = p_muscle
+    state[_S_P_SLOW] = p_slow
+    state[_S_X] = x
+    state[_S_VEL] = vel
+    state[_S_CREEP_RELIEF] = creep_relief
+    state[_S_TH_BACK] = th_back
+    state[_S_TH_TIP] = th_tip
+    state[_S_OM_TIP] = om_tip
+    state[_S_OFFSET] = offset
+    state[_S_Y_SENSOR] = y_sensor
+    state[_S_STEP] = step
+    state[_S_I_RING] = i_ring
 
 
 class MaxwellSlipPlant(ForeignPlant):
@@ -630,6 +688,22 @@ class MaxwellSlipPlant(ForeignPlant):
                 raise ValueError(f"unsupported effect {effect.name!r}")
         return par
 
+    def _run_params(self, rate_hz: float, effects: Sequence[Effect]) -> FloatArray:
+        """The kernel's parameters for a run at ``rate_hz`` with ``effects``."""
+        if not rate_hz > 0.0:
+            raise ValueError(f"rate_hz must be positive, got {rate_hz}")
+        n_sub = max(1, math.ceil(_SUBSTEP_HZ / rate_hz))
+        dt_s = 1.0 / (rate_hz * n_sub)
+        par = self._params(effects, dt_s)
+        par[_N_SUB] = n_sub
+        par[_DT] = dt_s
+        return par
+
+    def _measure(self, bend: FloatArray, rng: np.random.Generator) -> FloatArray:
+        """The sensor: white noise, then quantisation."""
+        noisy = bend + rng.normal(0.0, self._noise_white_rad, bend.size)
+        return np.asarray(np.round(noisy / self.quant_step_rad) * self.quant_step_rad)
+
     def simulate_clean(
         self,
         pressure_command_pa: FloatArray,
@@ -638,13 +712,7 @@ class MaxwellSlipPlant(ForeignPlant):
     ) -> tuple[FloatArray, FloatArray]:
         """Noise-free measured bend [rad] and muscle pressure [Pa] at each command sample."""
         cmd = np.ascontiguousarray(pressure_command_pa, dtype=np.float64).ravel()
-        if not rate_hz > 0.0:
-            raise ValueError(f"rate_hz must be positive, got {rate_hz}")
-        n_sub = max(1, math.ceil(_SUBSTEP_HZ / rate_hz))
-        dt_s = 1.0 / (rate_hz * n_sub)
-        par = self._params(effects, dt_s)
-        par[_N_SUB] = n_sub
-        par[_DT] = dt_s
+        par = self._run_params(rate_hz, effects)
         out = _kernel(cmd, par, self._k_el, self._f_el)
         return out[0].copy(), out[1].copy()
 
@@ -657,6 +725,27 @@ class MaxwellSlipPlant(ForeignPlant):
     ) -> FloatArray:
         """The measured bend [rad]: the clean bend plus white noise, quantised."""
         bend, _ = self.simulate_clean(pressure_command_pa, rate_hz, effects)
-        rng = np.random.default_rng(seed)
-        noisy = bend + rng.normal(0.0, self._noise_white_rad, bend.size)
-        return np.round(noisy / self.quant_step_rad) * self.quant_step_rad
+        return self._measure(bend, np.random.default_rng(seed))
+
+    def stepper(
+        self, rate_hz: float, effects: Sequence[Effect] = (), seed: int = 0
+    ) -> PlantStepper:
+        """This plant from rest, one command sample at a time (see :class:`PlantStepper`)."""
+        return _MaxwellSlipStepper(self, self._run_params(rate_hz, effects), seed)
+
+
+class _MaxwellSlipStepper(PlantStepper):
+    """Carries the kernel's state from one sample to the next."""
+
+    def __init__(self, plant: MaxwellSlipPlant, par: FloatArray, seed: int) -> None:
+        self._plant = plant
+        self._par = par
+        self._state = _fresh_state(par, plant._k_el.size)
+        self._rng = np.random.default_rng(seed)
+        self._cmd = np.zeros(1)
+        self._out = np.zeros((2, 1))
+
+    def step(self, pressure_command_pa: float) -> float:
+        self._cmd[0] = pressure_command_pa
+        _advance(self._cmd, self._par, self._plant._k_el, self._plant._f_el, self._state, self._out)
+        return float(self._plant._measure(self._out[0], self._rng)[0])
