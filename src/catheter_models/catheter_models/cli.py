@@ -196,6 +196,34 @@ def _cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_tune(args: argparse.Namespace) -> int:
+    from catheter_models.feedback.report import write_tune_report
+    from catheter_models.feedback.tune import design, identify, opening_pressure_pa
+    from catheter_models.models.data import recordings_from_bags
+
+    recordings = recordings_from_bags(args.bags, rate_hz=args.rate_hz)
+    model = identify(recordings)
+    print(f"loop model: {model.describe()}")
+    gains, found = design(
+        model,
+        max_sensitivity=args.max_sensitivity,
+        opening_pressure_pa=opening_pressure_pa(recordings),
+    )
+    notch = (
+        f", notch at {gains.notch_frequency_hz:.2f} Hz" if gains.notch_frequency_hz > 0.0 else ""
+    )
+    print(
+        f"PI: kp {gains.kp_pa_per_rad:.4g} Pa/rad, ki {gains.ki_pa_per_rad_s:.4g} Pa/(rad s)"
+        f"{notch}; opening pressure {gains.opening_pressure_pa / 1e5:.2f} bar"
+    )
+    print(f"margins on the model: {found.describe()}")
+    args.output.mkdir(parents=True, exist_ok=True)
+    print(f"gains written to {gains.save(args.output)}")
+    if args.report is not None:
+        print(f"report: {write_tune_report(recordings, model, gains, found, args.report)}")
+    return 0
+
+
 def _cmd_models(_args: argparse.Namespace) -> int:
     import inspect
 
@@ -518,6 +546,30 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--rate-hz", type=float, default=250.0, help="resampling rate [Hz]")
     train.add_argument("--quiet", action="store_true", help="no progress bar")
     train.set_defaults(func=_cmd_train)
+
+    tune = sub.add_parser(
+        "tune",
+        help="feedback gains from recorded steps (docs/closed_loop.md)",
+        description=(
+            "Fit the loop (dead time, lag, a ringing tip) to the pressure steps of recorded "
+            "bags, then choose the PI gains of largest integral gain whose loop keeps the "
+            "maximum sensitivity under a bound. Writes feedback.json into OUTPUT (a model "
+            "directory: the compensator node reads it from there with feedback:=pi)."
+        ),
+    )
+    tune.add_argument("bags", nargs="+", type=Path, metavar="BAG", help="bags with fast steps")
+    tune.add_argument(
+        "-o", "--output", type=Path, required=True, help="directory for feedback.json"
+    )
+    tune.add_argument(
+        "--max-sensitivity",
+        type=float,
+        default=1.6,
+        help="bound on Ms (1.6: gain margin >= 2.7, phase margin >= 36 deg)",
+    )
+    tune.add_argument("--report", type=Path, default=None, help="write an HTML report here")
+    tune.add_argument("--rate-hz", type=float, default=250.0, help="resampling rate [Hz]")
+    tune.set_defaults(func=_cmd_tune)
 
     models = sub.add_parser("models", help="list the model kinds and their settings")
     models.set_defaults(func=_cmd_models)

@@ -1,0 +1,15 @@
+"""Closed loop on the measured bend: the feedback law, and gains tuned from recorded steps.
+
+:mod:`.law` holds the law (:class:`FeedbackGains`, :class:`PIDFeedback`, :class:`ClosedLoop`),
+which the compensator node runs; :mod:`.tune` identifies the loop and designs the gains.
+"""
+
+from catheter_models.feedback.law import (
+    GAINS_FILE,
+    ClosedLoop,
+    FeedbackGains,
+    PIDFeedback,
+    limit_window,
+)
+
+__all__ = ["GAINS_FILE", "ClosedLoop", "FeedbackGains", "PIDFeedback", "limit_window"]

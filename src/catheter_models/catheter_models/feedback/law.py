@@ -1,0 +1,443 @@
+"""Feedback on the measured bend beside a feedforward compensator, without ROS.
+
+A feedforward compensator (the static inverse, the IDRDPI, the c-LSTM) is only as good as
+its model, and no model is exact on a catheter whose friction changes with the bend of the
+shaft, with temperature and with wear. The laser measures the bend at 250 Hz; this module
+uses it to correct the command:
+
+    command = feedforward(desired) + kp e + ki integral(e) + kd de/dt,   e = desired - measured
+
+* **Anti-windup.** The command is limited to a window (the pressure clamp, and the slew
+  limit around the last command); the integral is corrected by back-calculation toward what
+  was actually commanded, so a saturated valve does not leave a wound-up integral behind it.
+* **Deadband.** Below its opening pressure the muscle does nothing. Where the command is
+  already below it and the error asks for less bend, the integral is held: winding it
+  further down would only delay the next rise by the time it takes to wind back.
+* **Noise and a ringing tip.** The measured bend is low-pass filtered (first order) before
+  the error; the derivative, when used, is taken of the filtered measurement, not of the
+  set-point, so a set-point step does not kick the valve. Where the tip rings (a lightly
+  damped mode at a few hertz), a notch on the measured bend at its frequency keeps the
+  feedback from feeding the ringing (:mod:`catheter_models.feedback.tune` decides).
+* **Authority.** The feedback may move the command at most ``max_correction_pa`` away from
+  the feedforward's. A laser that freezes at a plausible value, or reads another bend, then
+  cannot drive the catheter to the clamp: the correction stops at the band, and when it has
+  pressed against it for ``authority_timeout_s`` the run is cut short
+  (:attr:`PIDFeedback.authority_fault`; the node ramps down and says why).
+* **Faults.** A non-finite or missing measurement holds the feedback where it is (no
+  integration, no proportional kick): feedback never acts on a sample it cannot trust. The
+  caller decides when a sensor is stale (the node ramps down).
+
+:class:`ClosedLoop` puts the pieces together for any plant, one sample at a time: ours, a
+foreign simulator, or a real rig driven by hand. The compensator node uses
+:class:`PIDFeedback` and :func:`limit_window` inside its control core, with the same limits.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+from catheter_models.errors import ParameterError
+
+GAINS_FILE = "feedback.json"
+"""Where a model directory keeps its tuned gains (beside the model they were tuned with)."""
+
+
+@dataclass(frozen=True)
+class FeedbackGains:
+    """Gains of the feedback on the measured bend, and what they were tuned on.
+
+    Attributes:
+        kp_pa_per_rad: Proportional gain [Pa/rad].
+        ki_pa_per_rad_s: Integral gain [Pa/(rad s)].
+        kd_pa_s_per_rad: Derivative gain [Pa s/rad] (0: a PI).
+        measurement_filter_s: Time constant of the first-order low-pass on the measured bend
+            [s] (0: none).
+        derivative_filter_s: Time constant of the derivative's own low-pass [s].
+        tracking_time_s: Back-calculation time of the anti-windup [s] (0: the integral time
+            kp / ki, the usual choice).
+        opening_pressure_pa: Below this gauge pressure the muscle does nothing [Pa]; the
+            integral is held there while the error asks for less bend (0: no deadband).
+        notch_frequency_hz: Centre of a notch on the measured bend [Hz] (0: none).
+        notch_damping: Damping of the notch's poles (its width; 0.5 is wide).
+        max_correction_pa: The farthest the feedback may move the command from the
+            feedforward's [Pa] (its authority; a safety limit, so it must be set).
+        authority_timeout_s: How long the feedback may press against that limit before the
+            run counts as faulty [s].
+        tuning: How the gains were found (model, margins), for the record; not used.
+    """
+
+    kp_pa_per_rad: float
+    ki_pa_per_rad_s: float
+    kd_pa_s_per_rad: float = 0.0
+    measurement_filter_s: float = 0.0
+    derivative_filter_s: float = 0.01
+    tracking_time_s: float = 0.0
+    opening_pressure_pa: float = 0.0
+    notch_frequency_hz: float = 0.0
+    notch_damping: float = 0.5
+    max_correction_pa: float = 0.5e5
+    authority_timeout_s: float = 0.5
+    tuning: dict[str, Any] = field(default_factory=dict, compare=False)
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            if f.name == "tuning":
+                continue
+            value = getattr(self, f.name)
+            if not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise ParameterError(f"feedback {f.name} must be a finite number, got {value!r}")
+            if value < 0.0:
+                why = (
+                    " (a negative gain pushes the bend away from the set-point: a sign error)"
+                    if f.name.startswith("k")
+                    else ""
+                )
+                raise ParameterError(f"feedback {f.name} must be >= 0{why}, got {value:g}")
+        if self.kd_pa_s_per_rad > 0.0 and self.derivative_filter_s <= 0.0:
+            raise ParameterError(
+                "feedback derivative_filter_s must be > 0 with a derivative gain "
+                "(an unfiltered derivative of the laser is its noise)"
+            )
+        for name in ("max_correction_pa", "authority_timeout_s"):
+            if getattr(self, name) <= 0.0:
+                raise ParameterError(f"feedback {name} must be > 0, got {getattr(self, name):g}")
+        if self.notch_frequency_hz > 0.0 and self.notch_damping <= 0.0:
+            raise ParameterError("feedback notch_damping must be > 0 with a notch")
+
+    @property
+    def integral_time_s(self) -> float:
+        """The integral time kp / ki [s] (inf for a P or PD)."""
+        if self.ki_pa_per_rad_s == 0.0:
+            return math.inf
+        return self.kp_pa_per_rad / self.ki_pa_per_rad_s
+
+    def save(self, directory: Path) -> Path:
+        """Write ``feedback.json`` into ``directory`` (beside a model); return its path."""
+        path = Path(directory) / GAINS_FILE
+        path.write_text(json.dumps(asdict(self), indent=2, sort_keys=True) + "\n")
+        return path
+
+    @classmethod
+    def load(cls, path: Path) -> FeedbackGains:
+        """Read gains from a ``feedback.json`` (or the directory holding one).
+
+        Raises:
+            ParameterError: missing file, unknown or misspelt keys, or a gain out of range.
+        """
+        path = Path(path)
+        if path.is_dir():
+            path = path / GAINS_FILE
+        try:
+            raw = json.loads(path.read_text())
+        except FileNotFoundError:
+            raise ParameterError(f"no feedback gains at {path}") from None
+        except json.JSONDecodeError as exc:
+            raise ParameterError(f"{path}: not JSON ({exc})") from None
+        if not isinstance(raw, dict):
+            raise ParameterError(f"{path}: expected an object of gains")
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(raw) - known)
+        if unknown:
+            raise ParameterError(
+                f"{path}: unknown feedback keys {', '.join(unknown)}; "
+                f"known: {', '.join(sorted(known))}"
+            )
+        return cls(**raw)
+
+
+class PIDFeedback:
+    """The feedback term: PID on the filtered measured bend, anti-windup, deadband hold.
+
+    Call :meth:`command` once per control tick with the feedforward's pressure and the
+    window the command must stay in; it returns the command inside that window.
+    """
+
+    def __init__(self, gains: FeedbackGains, rate_hz: float) -> None:
+        if not (math.isfinite(rate_hz) and rate_hz > 0.0):
+            raise ParameterError(f"feedback rate_hz must be > 0, got {rate_hz}")
+        if gains.notch_frequency_hz >= 0.45 * rate_hz:
+            raise ParameterError(
+                f"feedback notch_frequency_hz {gains.notch_frequency_hz:g} is not below the "
+                f"loop's Nyquist frequency ({0.5 * rate_hz:g} Hz at {rate_hz:g} Hz)"
+            )
+        self.gains = gains
+        self._notch = _notch_coefficients(gains.notch_frequency_hz, gains.notch_damping, rate_hz)
+        self._notch_state = (0.0, 0.0)
+        self.integral_pa = 0.0
+        self._filtered_rad: float | None = None
+        self._derivative_rad_s = 0.0
+        self.untrusted_samples = 0
+        """Ticks whose measurement was missing or non-finite (feedback held)."""
+        self.saturated_ticks = 0
+        """Ticks whose wanted command lay outside the window (the anti-windup acted)."""
+        self.last_feedback_pa = 0.0
+        """The feedback's share of the last command, before limiting [Pa]."""
+        self.at_authority_s = 0.0
+        """How long the correction has pressed against its authority without a break [s]."""
+
+    def reset(self) -> None:
+        """Forget the integral and the filters (a new run from rest)."""
+        self.integral_pa = 0.0
+        self._filtered_rad = None
+        self._derivative_rad_s = 0.0
+        self._notch_state = (0.0, 0.0)
+        self.last_feedback_pa = 0.0
+        self.at_authority_s = 0.0
+
+    @property
+    def authority_fault(self) -> str:
+        """Why the run should stop ('' while the feedback is within its authority)."""
+        g = self.gains
+        if self.at_authority_s < g.authority_timeout_s:
+            return ""
+        return (
+            f"feedback pressed against its +-{g.max_correction_pa / 1e5:g} bar authority for "
+            f"{self.at_authority_s:.2f} s: the measured bend does not follow the command "
+            "(a frozen, misplaced or misread laser?)"
+        )
+
+    def _notched(self, x: float, first: bool) -> float:
+        """The measurement through the notch (transposed direct form II)."""
+        if self._notch is None:
+            return x
+        b0, b1, b2, a1, a2 = self._notch
+        if first:
+            # Start at rest on the first sample (unit gain at DC).
+            self._notch_state = ((b1 - a1 + b2 - a2) * x, (b2 - a2) * x)
+        z1, z2 = self._notch_state
+        y = b0 * x + z1
+        self._notch_state = (b1 * x - a1 * y + z2, b2 * x - a2 * y)
+        return y
+
+    def _filter(self, measured_rad: float, dt_s: float) -> tuple[float, float]:
+        """The measurement after the low-pass, and its filtered rate [rad/s]."""
+        g = self.gains
+        previous = self._filtered_rad
+        measured_rad = self._notched(measured_rad, previous is None)
+        if previous is None:
+            self._filtered_rad = measured_rad
+            return measured_rad, 0.0
+        tau = g.measurement_filter_s
+        alpha = 1.0 if tau <= 0.0 else 1.0 - math.exp(-dt_s / tau)
+        filtered = previous + alpha * (measured_rad - previous)
+        self._filtered_rad = filtered
+        if g.kd_pa_s_per_rad > 0.0:
+            beta = 1.0 - math.exp(-dt_s / g.derivative_filter_s)
+            rate = (filtered - previous) / dt_s
+            self._derivative_rad_s += beta * (rate - self._derivative_rad_s)
+        return filtered, self._derivative_rad_s
+
+    def command(
+        self,
+        angle_desired_rad: float,
+        angle_measured_rad: float | None,
+        feedforward_pa: float,
+        *,
+        dt_s: float,
+        low_pa: float,
+        high_pa: float,
+        floor_pa: float,
+        ceiling_pa: float,
+    ) -> float:
+        """The command [Pa] for this tick of ``dt_s`` [s].
+
+        ``floor_pa``, ``ceiling_pa``: the pressure clamp. ``low_pa``, ``high_pa``: where the
+        command may go this tick (the clamp and the slew limit, :func:`limit_window`).
+
+        The feedback corrects the feedforward as the clamp lets it through (a feedforward
+        asking for less than zero is not the feedback's to undo), by at most its authority.
+        What the clamp or the authority cut off is given back to the integral
+        (back-calculation); while the slew limit holds the command back, the integral does not
+        push further against it.
+        """
+        g = self.gains
+        ff_in = min(max(feedforward_pa, floor_pa), ceiling_pa)
+        band = g.max_correction_pa
+        lo = max(floor_pa, ff_in - band)
+        hi = min(ceiling_pa, ff_in + band)
+        trusted = (
+            angle_measured_rad is not None and math.isfinite(angle_measured_rad) and dt_s > 0.0
+        )
+        if not trusted:
+            # Hold: keep the integral's correction, add nothing new.
+            self.untrusted_samples += 1
+            self.last_feedback_pa = self.integral_pa
+            held = min(max(ff_in + self.integral_pa, lo), hi)
+            return min(max(held, low_pa), high_pa)
+        assert angle_measured_rad is not None
+        filtered, rate = self._filter(angle_measured_rad, dt_s)
+        error = angle_desired_rad - filtered
+        proportional = g.kp_pa_per_rad * error
+        derivative = -g.kd_pa_s_per_rad * rate
+        correction = proportional + self.integral_pa + derivative
+        wanted = ff_in + correction
+        limited = min(max(wanted, lo), hi)
+        applied = min(max(limited, low_pa), high_pa)
+        if applied != wanted:
+            self.saturated_ticks += 1
+        clamped_only = min(max(wanted, floor_pa), ceiling_pa)
+        self.at_authority_s = self.at_authority_s + dt_s if limited != clamped_only else 0.0
+        if g.ki_pa_per_rad_s > 0.0:
+            push = g.ki_pa_per_rad_s * error
+            if push < 0.0 and applied <= g.opening_pressure_pa:
+                push = 0.0  # the muscle is shut: less pressure moves nothing
+            if (applied - limited) * push < 0.0:
+                push = 0.0  # the slew limit holds the command back: do not push against it
+            # Back-calculation; never faster than a tick, or the correction would overshoot.
+            tracking_s = max(g.tracking_time_s or g.integral_time_s, dt_s)
+            self.integral_pa += dt_s * (push + (limited - wanted) / tracking_s)
+        self.last_feedback_pa = correction
+        return applied
+
+
+def _notch_coefficients(
+    frequency_hz: float, damping: float, rate_hz: float
+) -> tuple[float, float, float, float, float] | None:
+    """Biquad (b0, b1, b2, a1, a2) of the notch, or None for no notch.
+
+    ``(s^2 + wn^2) / (s^2 + 2 damping wn s + wn^2)``, bilinear, pre-warped so that the notch
+    sits exactly at ``frequency_hz``.
+    """
+    if frequency_hz <= 0.0:
+        return None
+    wn = 2.0 * math.pi * frequency_hz
+    k = wn / math.tan(wn / (2.0 * rate_hz))
+    a0 = k * k + 2.0 * damping * wn * k + wn * wn
+    b0 = (k * k + wn * wn) / a0
+    b1 = 2.0 * (wn * wn - k * k) / a0
+    a1 = b1  # numerator and denominator share their middle coefficient
+    a2 = (k * k - 2.0 * damping * wn * k + wn * wn) / a0
+    return b0, b1, b0, a1, a2
+
+
+def limit_window(
+    last_pa: float, floor_pa: float, ceiling_pa: float, max_step_pa: float
+) -> tuple[float, float]:
+    """Where the next command may go: the clamp, and at most ``max_step_pa`` from the last.
+
+    One rule for the node's :class:`~catheter_control.control_core.ControlCore` and for
+    :class:`ClosedLoop`. A last command outside the clamp (a ceiling lowered mid-run) walks
+    back at the slew limit rather than jumping.
+    """
+    low = max(floor_pa, last_pa - max_step_pa)
+    high = min(ceiling_pa, last_pa + max_step_pa)
+    if low > high:
+        # Outside the clamp: move toward it by one step.
+        nearest = min(max(last_pa, floor_pa), ceiling_pa)
+        low = high = min(max(nearest, last_pa - max_step_pa), last_pa + max_step_pa)
+    return low, high
+
+
+class ClosedLoop:
+    """Feedforward plus feedback plus the node's limits, one sample at a time, for any plant.
+
+    ``step(angle_desired_rad, angle_measured_rad) -> pressure_pa``: call it once per sample
+    with the set-point and the bend measured since the last command; send the result to the
+    valve. A feedforward fitted at a rate must be stepped at that rate (``rate_hz``).
+
+    Args:
+        feedforward: A streaming compensator (``step(desired) -> pressure``, ``reset()``,
+            ``preview_s``, ``sample_period_s``), or None for feedback alone.
+        gains: Feedback gains, or None for feedforward alone.
+        rate_hz: The loop's sample rate [Hz].
+        min_pressure_pa, max_pressure_pa: The command's clamp, gauge [Pa].
+        max_slew_pa_per_s: The command's slew limit [Pa/s].
+    """
+
+    def __init__(
+        self,
+        feedforward: Any | None,
+        gains: FeedbackGains | None,
+        *,
+        rate_hz: float,
+        min_pressure_pa: float,
+        max_pressure_pa: float,
+        max_slew_pa_per_s: float,
+    ) -> None:
+        if not (math.isfinite(rate_hz) and rate_hz > 0.0):
+            raise ParameterError(f"rate_hz must be > 0, got {rate_hz}")
+        if not 0.0 <= min_pressure_pa <= max_pressure_pa:
+            raise ParameterError(
+                "need 0 <= min_pressure_pa <= max_pressure_pa, "
+                f"got {min_pressure_pa}, {max_pressure_pa}"
+            )
+        period = None if feedforward is None else feedforward.sample_period_s
+        if period is not None and abs(period * rate_hz - 1.0) > 1e-9:
+            raise ParameterError(
+                f"the feedforward works at {1.0 / period:g} Hz, the loop at {rate_hz:g} Hz"
+            )
+        self.feedforward = feedforward
+        self.feedback = None if gains is None else PIDFeedback(gains, rate_hz)
+        self.dt_s = 1.0 / rate_hz
+        self.min_pressure_pa = min_pressure_pa
+        self.max_pressure_pa = max_pressure_pa
+        self.max_step_pa = max_slew_pa_per_s * self.dt_s
+        self._last_pa = 0.0
+        self.last_feedforward_pa = 0.0
+        self.fault_reason = ""
+        """Why the loop ramped down ('' while it runs); cleared by :meth:`reset`."""
+
+    @property
+    def preview_s(self) -> float:
+        """How far ahead of now the feedforward wants the set-point [s]."""
+        return 0.0 if self.feedforward is None else float(self.feedforward.preview_s)
+
+    def reset(self) -> None:
+        """Back to rest: the feedforward's state, the feedback's integral, the last command."""
+        if self.feedforward is not None:
+            self.feedforward.reset()
+        if self.feedback is not None:
+            self.feedback.reset()
+        self._last_pa = 0.0
+        self.fault_reason = ""
+
+    def step(
+        self,
+        angle_desired_rad: float,
+        angle_measured_rad: float | None,
+        angle_preview_rad: float | None = None,
+    ) -> float:
+        """The pressure command [Pa] for this sample.
+
+        After a fault (the feedback pressed against its authority too long) the command
+        ramps down to zero at the slew limit and stays there until :meth:`reset`, as the
+        node's does; :attr:`fault_reason` says why.
+
+        Args:
+            angle_desired_rad: The set-point now [rad].
+            angle_measured_rad: The latest measured bend [rad] (None or NaN: not trusted).
+            angle_preview_rad: The set-point ``preview_s`` ahead, for a feedforward trained
+                to see it early (default: the set-point now).
+        """
+        if self.fault_reason:
+            low, high = limit_window(self._last_pa, 0.0, self.max_pressure_pa, self.max_step_pa)
+            self._last_pa = min(max(0.0, low), high)
+            return self._last_pa
+        ahead = angle_desired_rad if angle_preview_rad is None else angle_preview_rad
+        ff = 0.0 if self.feedforward is None else float(self.feedforward.step(ahead))
+        if not math.isfinite(ff):
+            raise ParameterError(f"the feedforward returned {ff} for {ahead:.4f} rad")
+        self.last_feedforward_pa = ff
+        low, high = limit_window(
+            self._last_pa, self.min_pressure_pa, self.max_pressure_pa, self.max_step_pa
+        )
+        if self.feedback is None:
+            command = min(max(ff, low), high)
+        else:
+            command = self.feedback.command(
+                angle_desired_rad,
+                angle_measured_rad,
+                ff,
+                dt_s=self.dt_s,
+                low_pa=low,
+                high_pa=high,
+                floor_pa=self.min_pressure_pa,
+                ceiling_pa=self.max_pressure_pa,
+            )
+            self.fault_reason = self.feedback.authority_fault
+        self._last_pa = command
+        return command
