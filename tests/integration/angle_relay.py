@@ -1,7 +1,9 @@
 """A stand-in laser driver for the tests: relays the rig's ``tip/angle_raw`` to ``tip/angle``.
 
 A test that must silence ``tip/angle`` while the rig runs on puts this between the two and
-stops it with SIGSTOP (a laser driver that hangs) and SIGCONT. It runs in its own process,
+stops it with SIGSTOP (a laser driver that hangs) and SIGCONT. SIGUSR1 freezes it instead:
+it goes on publishing at the rig's rate, but always the last message it had (a laser that
+freezes at a plausible value, which no staleness check can see). It runs in its own process,
 real time like the driver it stands for: relayed from the pytest process, which handles a
 thousand messages a second at normal priority, the stream stalled for over 100 ms often
 enough that the compensator (rightly) stopped before the fault was injected.
@@ -10,6 +12,8 @@ enough that the compensator (rightly) stopped before the fault was injected.
 """
 
 from __future__ import annotations
+
+import signal
 
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -29,11 +33,24 @@ class AngleRelay(Node):
 
     def __init__(self) -> None:
         super().__init__("angle_relay")
-        pub = self.create_publisher(JointState, TIP_ANGLE.name, STREAM)
-        self.create_subscription(JointState, RAW_ANGLE, pub.publish, RECORD, raw=True)
+        self._pub = self.create_publisher(JointState, TIP_ANGLE.name, STREAM)
+        self._frozen: bytes | None = None
+        self._freeze = False
+        self._last: bytes | None = None
+        self.create_subscription(JointState, RAW_ANGLE, self._relay, RECORD, raw=True)
+        signal.signal(signal.SIGUSR1, self._on_freeze)
         refused = set_process_realtime(RT_PRIORITY, background_offset=0)
         if refused:
             self.get_logger().warning(f"real-time scheduling {refused}")
+
+    def _on_freeze(self, _signum: int, _frame: object) -> None:
+        self._freeze = True
+
+    def _relay(self, raw: bytes) -> None:
+        if self._freeze and self._frozen is None:
+            self._frozen = self._last if self._last is not None else raw
+        self._last = raw
+        self._pub.publish(self._frozen if self._frozen is not None else raw)
 
 
 def main() -> None:

@@ -8,10 +8,17 @@ and faults on ``/diagnostics``. Service ``~/stop`` (std_srvs/Trigger) ramps the 
 With ``require_pressure_measured`` (default on) or ``require_tip_angle`` (default off: a
 patient has no tip sensor), a run does not start without that stream, and ramps down when it
 has been silent for ``sensor_timeout_s``.
+
+With ``feedback:=pi`` the command also corrects on the measured bend (``tip/angle``), with
+the gains of ``feedback_gains`` (a ``feedback.json`` written by ``catheter-lab tune``; ''
+takes the one in ``model_dir``, or the shipped one tuned on the simulated rig). The tip
+angle is then required whatever ``require_tip_angle`` says: feedback never runs on a stale
+stream, and a non-finite sample holds it (counted on ``/diagnostics``).
 """
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 
@@ -22,7 +29,13 @@ from trajectory_msgs.msg import JointTrajectory
 
 from catheter_control import qos
 from catheter_control.control_core import ControlCore, SensorWatch
-from catheter_control.models import COMPENSATORS, DEFAULT_COMPENSATOR, load_compensator
+from catheter_control.models import (
+    COMPENSATORS,
+    DEFAULT_COMPENSATOR,
+    FEEDBACKS,
+    load_compensator,
+    load_feedback,
+)
 from catheter_control.trajectory import TrajectoryLimits, TrajectoryPlan
 from catheter_driver import diagnostics, messages
 from catheter_driver.loop_node import LoopNode
@@ -72,7 +85,21 @@ class CompensatorNode(LoopNode):
             )
         )
         model_dir = str(declare_plain(self, "model_dir", "", "model directory ('' = shipped)"))
+        self.feedback_kind = str(
+            declare_plain(
+                self, "feedback", "none", f"feedback on tip/angle: one of {', '.join(FEEDBACKS)}"
+            )
+        )
+        gains_path = str(
+            declare_plain(
+                self,
+                "feedback_gains",
+                "",
+                "feedback.json (or its directory); '' = the one in model_dir, or the shipped one",
+            )
+        )
         self.rate_hz = declare_float(self, "control_rate_hz", _RATE)
+        feedback = load_feedback(self.feedback_kind, gains_path, model_dir, self.rate_hz)
         pmin = declare_float(self, "min_pressure_pa", _PMIN)
         pmax = declare_float(self, "max_pressure_pa", _PMAX)
         if pmin > pmax:
@@ -96,6 +123,8 @@ class CompensatorNode(LoopNode):
                 default,
                 f"stop when {spec.name} ({why}) goes stale",
             )
+            # Feedback acts on the laser's bend: a run must not go on without it.
+            or (feedback is not None and spec is TIP_ANGLE)
         )
         self.watch = SensorWatch(required, declare_float(self, "sensor_timeout_s", _STALE))
         self._pending: tuple[TrajectoryPlan, float] | None = None
@@ -109,7 +138,9 @@ class CompensatorNode(LoopNode):
             pmin,
             pmax,
             declare_float(self, "max_slew_pa_per_s", _SLEW),
+            feedback,
         )
+        self._angle_measured_rad: float | None = None
         self._lock = threading.Lock()
         self._refusals = 0
         self._last_refusal = ""
@@ -145,16 +176,35 @@ class CompensatorNode(LoopNode):
             {
                 spec.name: msg_type
                 for spec, msg_type in ((PRESSURE_MEASURED, FluidPressure), (TIP_ANGLE, JointState))
-                if spec.name in required
+                if spec.name in required and not (feedback is not None and spec is TIP_ANGLE)
             },
             qos_profile_sensor_data,
+        )
+        # The feedback reads the bend itself, so its samples are deserialised (the others
+        # only need to be seen to arrive).
+        self._angles = (
+            None
+            if feedback is None
+            else PolledTopics(
+                self,
+                {TIP_ANGLE.name: JointState},
+                qos_profile_sensor_data,
+                raw=False,
+                suffix="_angle",
+            )
         )
         self.create_service(Trigger, "~/stop", self._on_stop)
         self.create_timer(1.0, self._publish_diagnostics)
         self.create_loop(self.rate_hz, self._tick)
         model_rate = f", model stepped at {self.model_rate_hz:g} Hz" if self.model_rate_hz else ""
+        fb_text = (
+            ""
+            if feedback is None
+            else f", feedback {self.feedback_kind} (kp {feedback.gains.kp_pa_per_rad:.4g} Pa/rad, "
+            f"ki {feedback.gains.ki_pa_per_rad_s:.4g} Pa/(rad s))"
+        )
         self.get_logger().info(
-            f"compensator {kind!r} at {self.rate_hz:g} Hz{model_rate}; "
+            f"compensator {kind!r} at {self.rate_hz:g} Hz{model_rate}{fb_text}; "
             f"requires {', '.join(required) or 'no sensor stream'}"
         )
 
@@ -204,6 +254,15 @@ class CompensatorNode(LoopNode):
         refusal = fault = ""
         for name in self._sensors.poll():
             self.watch.seen(name, deadline_s)
+        if self._angles is not None:
+            samples = self._angles.take(TIP_ANGLE.name)
+            if samples:
+                self.watch.seen(TIP_ANGLE.name, deadline_s)
+                try:
+                    self._angle_measured_rad = messages.angle_rad_from(samples[-1])
+                except ValueError:
+                    # A sample without the bend joint: the feedback holds and counts it.
+                    self._angle_measured_rad = math.nan
         with self._lock:
             stale = self.watch.stale(deadline_s)
             if self._pending is not None:
@@ -222,7 +281,7 @@ class CompensatorNode(LoopNode):
             if stale and self.core.state != ControlCore.IDLE and not self.core.fault_reason:
                 self.core.fault(stale)
                 fault = stale
-            out = self.core.tick(deadline_s, self.loop.period_s)
+            out = self.core.tick(deadline_s, self.loop.period_s, self._angle_measured_rad)
         if refusal:
             self._refuse(refusal)
         if fault:
@@ -244,6 +303,16 @@ class CompensatorNode(LoopNode):
             state, bad_model = self.core.state, self.core.nonfinite_from_compensator
             model_error, fault = self.core.compensator_error, self.core.fault_reason
             model_steps = self.core.model_steps
+            fb = self.core.feedback
+            fb_values = (
+                {}
+                if fb is None
+                else {
+                    "feedback_integral_pa": f"{fb.integral_pa:.0f}",
+                    "feedback_untrusted_samples": fb.untrusted_samples,
+                    "feedback_saturated_ticks": fb.saturated_ticks,
+                }
+            )
         now_s = time.monotonic()
         level, message = diagnostics.OK, state
         if self.loop.error is not None:
@@ -268,6 +337,8 @@ class CompensatorNode(LoopNode):
                 "control_rate_hz": f"{self.rate_hz:g}",
                 "model_rate_hz": f"{self.model_rate_hz:g}" if self.model_rate_hz else "any",
                 "model_steps": model_steps,
+                "feedback": self.feedback_kind,
+                **fb_values,
                 "fault": fault,
                 "accept_trajectories": str(self.accept_trajectories).lower(),
                 "trajectories_accepted": accepted,
@@ -297,9 +368,10 @@ class CompensatorNode(LoopNode):
     def destroy_node(self) -> None:
         """Stop the loop (which polls the sensors) before their helper node goes."""
         super().destroy_node()
-        sensors = getattr(self, "_sensors", None)
-        if sensors is not None:
-            sensors.destroy()
+        for name in ("_sensors", "_angles"):
+            polled = getattr(self, name, None)
+            if polled is not None:
+                polled.destroy()
 
 
 def main(args: list[str] | None = None) -> None:

@@ -1,9 +1,12 @@
 """The compensator's tick, without ROS: trajectory in, safe pressure command out.
 
 Every tick takes the desired bend at the current time, asks the streaming compensator for a
-pressure, then clamps it to the configured range and limits its slew. Once the plan has run
-out (or a stop was asked for, or a required sensor went stale) it ramps the pressure down to
-zero at the slew limit and goes idle: the valve driver's watchdog does the rest.
+pressure, adds the feedback on the measured bend when there is one
+(:class:`~catheter_models.feedback.PIDFeedback`), then clamps it to the configured range and
+limits its slew (:func:`~catheter_models.feedback.limit_window`, the one rule for both).
+Once the plan has run out (or a stop was asked for, or a required sensor went stale) it
+ramps the pressure down to zero at the slew limit and goes idle: the valve driver's
+watchdog does the rest.
 
 A model fitted at one sample rate is stepped at that rate whatever the loop's rate: it reads
 the plan at its own sample instants (the plan is known ahead, so it can step one sample early)
@@ -19,6 +22,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from catheter_control.trajectory import TrajectoryPlan
+from catheter_models.feedback import PIDFeedback, limit_window
 from catheter_models.static_map import StaticMap
 
 
@@ -74,6 +78,8 @@ class ControlCore:
         compensator: the feedforward compensator.
         min_pressure_pa, max_pressure_pa: command range, gauge [Pa]; never left.
         max_slew_pa_per_s: command slew limit [Pa/s].
+        feedback: feedback on the measured bend while following a plan (None: open loop).
+            It acts only on samples given to :meth:`tick`; a ramp-down is never corrected.
     """
 
     IDLE = "idle"
@@ -90,6 +96,7 @@ class ControlCore:
         min_pressure_pa: float,
         max_pressure_pa: float,
         max_slew_pa_per_s: float,
+        feedback: PIDFeedback | None = None,
     ) -> None:
         if not 0.0 <= min_pressure_pa <= max_pressure_pa:
             raise ValueError(
@@ -100,6 +107,7 @@ class ControlCore:
         if period is not None and not (math.isfinite(period) and period > 0.0):
             raise ValueError(f"compensator sample_period_s must be > 0 s or None, got {period}")
         self.compensator = compensator
+        self.feedback = feedback
         self.min_pressure_pa = min_pressure_pa
         self.max_pressure_pa = max_pressure_pa
         self.max_slew_pa_per_s = max_slew_pa_per_s
@@ -130,6 +138,8 @@ class ControlCore:
         """
         if self.state == self.IDLE:
             self.compensator.reset()
+            if self.feedback is not None:
+                self.feedback.reset()
             self._last_pa = 0.0
             self._last_target_pa = 0.0
             self._primed = False
@@ -184,8 +194,14 @@ class ControlCore:
             return self._y0
         return self._y0 + min(phase, 1.0) * (self._y1 - self._y0)
 
-    def tick(self, now_s: float, dt_s: float) -> TickOutput | None:
-        """One control tick at time ``now_s`` (``dt_s`` since the last). None when idle."""
+    def tick(
+        self, now_s: float, dt_s: float, angle_measured_rad: float | None = None
+    ) -> TickOutput | None:
+        """One control tick at time ``now_s`` (``dt_s`` since the last). None when idle.
+
+        ``angle_measured_rad`` is the newest measured bend for the feedback (None or
+        non-finite: the feedback holds; the caller ramps down a stale sensor).
+        """
         if self.state == self.IDLE:
             return None
         target = 0.0
@@ -211,9 +227,25 @@ class ControlCore:
         if self.state == self.RAMPING_DOWN:
             target = 0.0
         floor = 0.0 if self.state == self.RAMPING_DOWN else self.min_pressure_pa
-        target = min(max(target, floor), self.max_pressure_pa)
-        step = self.max_slew_pa_per_s * dt_s
-        command = min(max(target, self._last_pa - step), self._last_pa + step)
+        low, high = limit_window(
+            self._last_pa, floor, self.max_pressure_pa, self.max_slew_pa_per_s * dt_s
+        )
+        if self.state == self.FOLLOWING and self.feedback is not None:
+            command = self.feedback.command(
+                self._last_angle,
+                angle_measured_rad,
+                target,
+                dt_s=dt_s,
+                low_pa=low,
+                high_pa=high,
+                floor_pa=floor,
+                ceiling_pa=self.max_pressure_pa,
+            )
+            if self.feedback.authority_fault:
+                # The bend does not answer the command: stop trusting the loop.
+                self.fault(self.feedback.authority_fault)
+        else:
+            command = min(max(target, low), high)
         self._last_pa = command
         if self.state == self.RAMPING_DOWN and command <= 0.0:
             self.state = self.IDLE

@@ -22,6 +22,7 @@ from catheter_driver.node_main import run_node
 from catheter_driver.params import declare_float, declare_int, declare_plain
 from catheter_models.contract import PRESSURE_COMMAND
 from catheter_models.errors import SignalError
+from catheter_models.lab.signals import lab_spec
 from catheter_models.plant.config import ParamSpec
 from catheter_models.signals import (
     check_pressure_signal,
@@ -79,7 +80,9 @@ class ExciteNode(LoopNode):
         elif name == "clstm_training":
             specs = clstm_training_set()
         else:
-            specs = tuple(get_preset(n.strip()) for n in name.split(","))
+            # The lab's plateau and steps excitations (lab_steps_<seed>: what
+            # `catheter-lab tune` identifies the loop from) are named by seed, not listed.
+            specs = tuple(lab_spec(n.strip()) or get_preset(n.strip()) for n in name.split(","))
         # Zero pressure first: a listener that matched a moment late misses rest, not signal.
         pieces = [np.zeros(round(lead_in_s * self.rate_hz))]
         tail = np.zeros(round(tail_s * self.rate_hz))

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from catheter_control.models import COMPENSATORS, DEFAULT_COMPENSATOR, SHIPPED
+from catheter_control.models import COMPENSATORS, DEFAULT_COMPENSATOR, FEEDBACKS, SHIPPED
 from catheter_control.trajectory import (
     TrajectoryLimits,
     TrajectoryPlan,
@@ -118,6 +118,19 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument(
         "--model-dir", default="", help="model directory for the compensator ('' = shipped)"
     )
+    parser.add_argument(
+        "--feedback",
+        choices=FEEDBACKS,
+        default="none",
+        help="with --sim/--emulated-rig: feedback on the measured bend beside the compensator "
+        "(pi: gains from --feedback-gains)",
+    )
+    parser.add_argument(
+        "--feedback-gains",
+        default="",
+        help="feedback.json written by catheter-lab tune ('' = the one in --model-dir, or the "
+        "shipped one, tuned on the simulated rig)",
+    )
     parser.add_argument("--out", type=Path, help="run directory (default runs/<time>-<name>)")
     parser.add_argument("--namespace", default=DEFAULT_NAMESPACE)
     parser.add_argument("--control-rate-hz", type=float, default=250.0)
@@ -192,6 +205,8 @@ def main(argv: list[str] | None = None) -> int:
             "hardware": hardware,
             "compensator": args.compensator,
             "model_dir": args.model_dir or f"shipped ({SHIPPED[args.compensator]})",
+            "feedback": args.feedback,
+            "feedback_gains": args.feedback_gains or "beside the model (or shipped)",
         }
         run_dir.mkdir(parents=True, exist_ok=True)
         specs = sim_graph_specs(
@@ -201,6 +216,8 @@ def main(argv: list[str] | None = None) -> int:
                 "control_rate_hz": args.control_rate_hz,
                 "compensator": args.compensator,
                 "model_dir": args.model_dir,
+                "feedback": args.feedback,
+                "feedback_gains": args.feedback_gains,
                 # The local rig has a laser: stop if it goes quiet (a patient's would not).
                 "require_tip_angle": True,
             },
@@ -444,6 +461,21 @@ def _run(
         [v for t, v in data.driver if t >= first],
     )
     print(timing_text(timing))
+    # What the compensator says it ran, from its last report of the run.
+    last = next((v for t, v in reversed(data.compensator) if t >= first), {})
+    controller = {
+        k: last[k]
+        for k in (
+            "compensator",
+            "feedback",
+            "feedback_untrusted_samples",
+            "feedback_saturated_ticks",
+            "feedback_integral_pa",
+        )
+        if k in last
+    }
+    if controller:
+        print("Controller: " + ", ".join(f"{k} {v}" for k, v in controller.items()))
     losses = _losses(data, bag_path)
     for line in losses["said"]:
         print(line, file=sys.stderr)
@@ -458,6 +490,7 @@ def _run(
             # Why the compensator stopped part-way ('' if the run went to its end).
             "stopped": data.stopped,
             "lead_in_s": lead_s,
+            "controller": controller,
             "timing": timing,
             # Samples missing from the bag (the recorder's counts, by topic) and from the
             # streams this run was scored on (from their stamps).

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from catheter_control.control_core import StaticInverseCompensator, StreamingCompensator
 from catheter_models.errors import ParameterError
+from catheter_models.feedback import GAINS_FILE, FeedbackGains, PIDFeedback
 from catheter_models.models.base import Stream
 from catheter_models.static_map import StaticMap
 
@@ -21,6 +22,10 @@ DEFAULT_COMPENSATOR = "clstm"
 """The thesis's best compensator (Tables 11.1-11.4), and ours on the simulated rig."""
 SHIPPED = {"none": "static_map", "idrdpi": "idrdpi", "clstm": "clstm"}
 """The model directory shipped for each compensator (fitted on the simulated rig)."""
+FEEDBACKS = ("none", "pi")
+"""Feedback on the measured bend the node can run beside its compensator."""
+SHIPPED_GAINS = "feedback"
+"""Directory of the shipped feedback gains (tuned on the simulated rig's recorded steps)."""
 
 
 def shipped_model_dir(name: str = "static_map") -> Path:
@@ -79,3 +84,27 @@ def load_compensator(kind: str, model_dir: str) -> StreamingCompensator:
     return ModelCompensator(
         model.stream(), model.preview_samples / rate_hz, 1.0 / rate_hz, f"{kind} ({path})"
     )
+
+
+def load_feedback(kind: str, gains_path: str, model_dir: str, rate_hz: float) -> PIDFeedback | None:
+    """The feedback the node runs: None for ``none``, else PI with gains from a file.
+
+    ``gains_path`` '' takes ``feedback.json`` from ``model_dir``, or the shipped gains when
+    the model is the shipped one (tuned on the simulated rig: a real rig needs its own,
+    ``catheter-lab tune``).
+
+    Raises:
+        ParameterError: Unknown kind, a missing or malformed gains file, or a gain out of
+            range (a negative gain, a sign error, is refused here, before anything moves).
+    """
+    if kind not in FEEDBACKS:
+        raise ParameterError(f"unknown feedback {kind!r}; available: {', '.join(FEEDBACKS)}")
+    if kind == "none":
+        return None
+    if gains_path:
+        path = Path(gains_path)
+    elif model_dir:
+        path = Path(model_dir) / GAINS_FILE
+    else:
+        path = shipped_model_dir(SHIPPED_GAINS) / GAINS_FILE
+    return PIDFeedback(FeedbackGains.load(path), rate_hz)

@@ -69,6 +69,19 @@ def generate_launch_description() -> LaunchDescription:
             "control_rate_hz", default_value="250.0", description="control loop rate [Hz]"
         ),
         DeclareLaunchArgument(
+            "feedback",
+            default_value="none",
+            choices=["none", "pi"],
+            description="feedback on tip/angle beside the compensator (pi: gains from "
+            "feedback_gains; tip/angle is then required)",
+        ),
+        DeclareLaunchArgument(
+            "feedback_gains",
+            default_value="",
+            description="feedback.json from catheter-lab tune ('' = the one in model_dir, or "
+            "the shipped one, tuned on the simulated rig)",
+        ),
+        DeclareLaunchArgument(
             "require_tip_angle",
             default_value="false",
             choices=["true", "false"],
@@ -141,6 +154,10 @@ def generate_launch_description() -> LaunchDescription:
             {
                 "compensator": ParameterValue(LaunchConfiguration("compensator"), value_type=str),
                 "model_dir": ParameterValue(LaunchConfiguration("model_dir"), value_type=str),
+                "feedback": ParameterValue(LaunchConfiguration("feedback"), value_type=str),
+                "feedback_gains": ParameterValue(
+                    LaunchConfiguration("feedback_gains"), value_type=str
+                ),
                 "control_rate_hz": ParameterValue(
                     LaunchConfiguration("control_rate_hz"), value_type=float
                 ),
