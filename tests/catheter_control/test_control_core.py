@@ -250,3 +250,41 @@ def test_a_fault_while_idle_changes_nothing() -> None:
     core.fault("pressure/measured required but none received")
     assert core.state == ControlCore.IDLE and core.fault_reason == ""
     assert core.tick(0.0, DT) is None
+
+
+@pytest.mark.parametrize("loop_hz", [250.0, 1000.0])
+def test_feedback_in_the_core_tracks_the_rig_at_250_hz_and_1_khz(loop_hz: float) -> None:
+    """The node's core with the shipped static inverse and gains, on the simulated rig: the
+    laser samples at 250 Hz whatever the loop's rate (each sample is used until the next)."""
+    from catheter_control.models import load_compensator, load_feedback
+    from catheter_models.plant import Plant, PlantConfig
+    from catheter_models.signals import get_preset
+
+    desired = np.asarray(get_preset("traj_up_chirp").generate(RATE_HZ).values_si)
+    t_knots = np.arange(desired.size) / RATE_HZ
+    plan = TrajectoryPlan.from_knots(t_knots, desired, TrajectoryLimits(), loop_hz)
+    per_sample = round(loop_hz / RATE_HZ)
+
+    def rmse_deg(with_feedback: bool) -> float:
+        core = ControlCore(
+            load_compensator("none", ""),
+            0.0,
+            3.0e5,
+            20.0e5,
+            load_feedback("pi" if with_feedback else "none", "", "", loop_hz),
+        )
+        plant = Plant(PlantConfig.thesis_rig())
+        core.start(plan, 0.0)
+        angle, errors = 0.0, []
+        for k in range(desired.size):
+            command = 0.0
+            for j in range(per_sample):
+                out = core.tick((k * per_sample + j) / loop_hz, 1.0 / loop_hz, angle)
+                command = 0.0 if out is None else out.pressure_pa
+            sample = plant.step(command)
+            angle = sample.angle_rad
+            errors.append(angle - desired[k])
+        return math.degrees(float(np.sqrt(np.mean(np.square(errors)))))
+
+    open_loop, closed = rmse_deg(False), rmse_deg(True)
+    assert closed < 0.35 * open_loop, (open_loop, closed)

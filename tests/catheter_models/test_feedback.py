@@ -172,6 +172,26 @@ def test_below_the_opening_pressure_the_integral_is_not_wound_down() -> None:
     assert plain.integral_pa < -0.39e5
 
 
+def test_in_the_dead_band_the_integral_does_not_charge_and_a_rise_jumps_it() -> None:
+    """The feedforward (a model that underestimates the dead band) sits at 0.3 bar under the
+    0.5 bar opening. A small error there (within the laser's noise band) charges nothing: a
+    charge would fire as a spike once the muscle opens. A set-point 3 deg above the bend
+    takes the command to the opening pressure on the first tick."""
+    gains = FeedbackGains(1.0e4, 5.0e6, opening_pressure_pa=0.5e5)
+    limits = {"dt_s": DT_S, "low_pa": 0.0, "high_pa": 3e5, "floor_pa": 0.0, "ceiling_pa": 3e5}
+    fb = PIDFeedback(gains, RATE_HZ)
+    for _ in range(500):
+        u = fb.command(math.radians(0.1), 0.0, 0.3e5, **limits)
+    assert fb.integral_pa == 0.0
+    assert u < 0.35e5
+    # Without the dead band the same error charges the integral over those 2 s.
+    plain = PIDFeedback(FeedbackGains(1.0e4, 5.0e6), RATE_HZ)
+    for _ in range(500):
+        plain.command(math.radians(0.1), 0.0, 0.3e5, **limits)
+    assert plain.integral_pa > 1.5e4
+    assert fb.command(math.radians(3.0), 0.0, 0.3e5, **limits) == 0.5e5
+
+
 def test_an_untrusted_sample_holds_the_feedback_and_is_counted() -> None:
     fb = PIDFeedback(GAINS, RATE_HZ)
     for _ in range(50):

@@ -10,9 +10,11 @@ uses it to correct the command:
 * **Anti-windup.** The command is limited to a window (the pressure clamp, and the slew
   limit around the last command); the integral is corrected by back-calculation toward what
   was actually commanded, so a saturated valve does not leave a wound-up integral behind it.
-* **Deadband.** Below its opening pressure the muscle does nothing. Where the command is
-  already below it and the error asks for less bend, the integral is held: winding it
-  further down would only delay the next rise by the time it takes to wind back.
+* **Dead band.** Below its opening pressure the muscle does nothing, so there the integral
+  is held: wound down, it would delay the next rise by the time it takes to wind back; wound
+  up, it would charge while nothing moves and fire as a spike once the muscle opens. Where
+  the bend must rise and the command sits in the dead band, the command goes to the opening
+  pressure at once (an inverse of the dead band in the feedback path).
 * **Noise and a ringing tip.** The measured bend is low-pass filtered (first order) before
   the error; the derivative, when used, is taken of the filtered measurement, not of the
   set-point, so a set-point step does not kick the valve. Where the tip rings (a lightly
@@ -43,6 +45,10 @@ from typing import Any
 from catheter_models.errors import ParameterError
 
 GAINS_FILE = "feedback.json"
+OPENING_ERROR_RAD = math.radians(0.2)
+"""A bend this far below the set-point, with the command in the dead band, lifts the command
+to the opening pressure: well above the laser's noise (0.05 deg), so a catheter at rest on a
+zero set-point is not kicked by it."""
 """Where a model directory keeps its tuned gains (beside the model they were tuned with)."""
 
 
@@ -275,6 +281,12 @@ class PIDFeedback:
         derivative = -g.kd_pa_s_per_rad * rate
         correction = proportional + self.integral_pa + derivative
         wanted = ff_in + correction
+        if wanted < g.opening_pressure_pa and error > OPENING_ERROR_RAD:
+            # The bend must rise but the command is where the muscle does nothing: go to the
+            # edge of motion at once instead of charging the integral across the dead band
+            # (a charge that fires as a spike once the muscle opens).
+            wanted = g.opening_pressure_pa
+            correction = wanted - ff_in
         limited = min(max(wanted, lo), hi)
         applied = min(max(limited, low_pa), high_pa)
         if applied != wanted:
@@ -283,8 +295,11 @@ class PIDFeedback:
         self.at_authority_s = self.at_authority_s + dt_s if limited != clamped_only else 0.0
         if g.ki_pa_per_rad_s > 0.0:
             push = g.ki_pa_per_rad_s * error
-            if push < 0.0 and applied <= g.opening_pressure_pa:
-                push = 0.0  # the muscle is shut: less pressure moves nothing
+            shut = applied < g.opening_pressure_pa or (
+                applied == g.opening_pressure_pa and push < 0.0
+            )
+            if shut:
+                push = 0.0  # the muscle does nothing here: the integral would only charge
             if (applied - limited) * push < 0.0:
                 push = 0.0  # the slew limit holds the command back: do not push against it
             # Back-calculation; never faster than a tick, or the correction would overshoot.
