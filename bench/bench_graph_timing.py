@@ -23,6 +23,8 @@ The 1 kHz row is the same graph four times as fast
 
     .venv/bin/python bench/bench_graph_timing.py            # 6 x 60 s, about 8 minutes
     .venv/bin/python bench/bench_graph_timing.py --quick    # 6 x 10 s smoke run
+    .venv/bin/python bench/bench_graph_timing.py --feedback # both rates, without and with
+                                                            # feedback pi (4 x 60 s)
 
 Writes ``bench/results/graph_timing.json`` (``--quick``: ``graph_timing.quick.json``).
 Run it on an otherwise idle machine: the graph shares 2 cores with anything else running
@@ -62,6 +64,14 @@ rates, idle and with two busy-loop processes on the two cores (a lab PC doing ot
 then two baselines at 1 kHz: normal scheduling, what a node falls back to where the OS refuses
 real-time priority, and the collector left to scan start-up's objects (a full collection
 holds the GIL for ~26 ms in the compensator)."""
+FEEDBACK_RUNS: tuple[tuple[str, float, int | None, dict[str, str], int], ...] = (
+    ("250 Hz", 250.0, None, {}, 0),
+    ("250 Hz, feedback pi", 250.0, None, {"FEEDBACK": "pi"}, 0),
+    ("1 kHz", 1000.0, None, {}, 0),
+    ("1 kHz, feedback pi", 1000.0, None, {"FEEDBACK": "pi"}, 0),
+)
+"""``--feedback``: the graph as shipped at both rates, without and with the PI on tip/angle
+beside the c-LSTM (docs/closed_loop.md), in one run: what the feedback costs per tick."""
 MISSED_TARGET = 0.001
 """Issue 5: at most 0.1 % of deadlines missed."""
 
@@ -117,6 +127,7 @@ def run_once(
         str(out),
         "--no-progress",
         *([] if rt_priority is None else ["--rt-priority", str(rt_priority)]),
+        *(["--feedback", extra_env["FEEDBACK"]] if extra_env and "FEEDBACK" in extra_env else []),
     ]
     busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(hogs)]
     try:
@@ -178,16 +189,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--quick", action="store_true", help="10 s per rate (smoke run)")
     parser.add_argument("--duration-s", type=float, default=60.0)
     parser.add_argument("--out", type=Path, help="JSON path (default bench/results/...)")
+    parser.add_argument(
+        "--feedback",
+        action="store_true",
+        help="both rates without and with feedback pi (graph_timing_feedback.json)",
+    )
     args = parser.parse_args(argv)
     duration_s = 10.0 if args.quick else args.duration_s
-    out_json = args.out or RESULTS / (
-        "graph_timing.quick.json" if args.quick else "graph_timing.json"
-    )
+    stem = "graph_timing_feedback" if args.feedback else "graph_timing"
+    out_json = args.out or RESULTS / (f"{stem}.quick.json" if args.quick else f"{stem}.json")
+    runs = FEEDBACK_RUNS if args.feedback else RUNS
 
     rows: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory(prefix="bench_graph_") as tmp:
         csv = trajectory_csv(Path(tmp) / "trajectory.csv", duration_s)
-        for i, (label, rate_hz, rt_priority, extra_env, hogs) in enumerate(RUNS):
+        for i, (label, rate_hz, rt_priority, extra_env, hogs) in enumerate(runs):
             print(f"--- {label}, {duration_s:g} s of trajectory ---", flush=True)
             report = run_once(
                 rate_hz,
@@ -202,7 +218,8 @@ def main(argv: list[str] | None = None) -> int:
             rows.append(
                 {
                     "label": label,
-                    "baseline": rt_priority == 0 or bool(extra_env),
+                    "baseline": rt_priority == 0 or "CATHETER_GC_FREEZE" in extra_env,
+                    "feedback": extra_env.get("FEEDBACK", "none"),
                     "control_rate_hz": rate_hz,
                     **timing,
                     "missed_target_met": (
