@@ -133,6 +133,8 @@ def run_trajectory(
         "overshoot_deg": math.degrees(max(0.0, float(np.max(err)))),
         "rmse_reachable_deg": math.degrees(float(np.sqrt(np.mean(err[reach] ** 2)))),
         "saturated_share": float(np.mean(command[before.size :] >= DEFAULT_MAX_PRESSURE_PA - 1.0)),
+        # A run the feedback's authority bound cut short (ramped down) says so here.
+        "fault": loop.fault_reason,
         "_series": (desired, measured[before.size :]),
     }
 
@@ -200,6 +202,8 @@ def score(
             for trajectory in TEST_TRAJECTORIES:
                 result = run_trajectory(new_plant, ff, fb, trajectory)
                 series[f"{label}|{kind}|{fb_label}|{trajectory}"] = result.pop("_series")
+                if result["fault"]:
+                    print(f"  {label} {kind} {fb_label} {trajectory}: {result['fault']}")
                 row[trajectory] = result
             table[f"{kind} {fb_label}"] = row
             rmse = " ".join(f"{row[t]['rmse_deg']:6.3f}" for t in TEST_TRAJECTORIES)
