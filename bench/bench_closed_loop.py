@@ -54,7 +54,11 @@ from foreign_plants.base import ForeignPlant  # noqa: E402
 from foreign_plants.cases import RATE_HZ, Case, draw_case, make_case  # noqa: E402
 
 from catheter_control.control_core import StaticInverseCompensator  # noqa: E402
-from catheter_control.models import load_compensator, shipped_model_dir  # noqa: E402
+from catheter_control.models import (  # noqa: E402
+    ModelCompensator,
+    load_compensator,
+    shipped_model_dir,
+)
 from catheter_models.feedback import ClosedLoop, FeedbackGains  # noqa: E402
 from catheter_models.feedback.tune import (  # noqa: E402
     design,
@@ -81,23 +85,6 @@ STRESS_EFFECTS = ("pneumatic_lag", "transport_delay", "tip_dynamics")
 Stepper = Callable[[float], float]
 
 
-class _Ff:
-    """A compensator with the attributes ClosedLoop reads."""
-
-    def __init__(self, stream: Any, preview_samples: int, label: str) -> None:
-        self._stream = stream
-        self.preview_s = preview_samples / RATE_HZ
-        self.sample_period_s = 1.0 / RATE_HZ
-        self.preview_samples = preview_samples
-        self.label = label
-
-    def reset(self) -> None:
-        self._stream.reset()
-
-    def step(self, angle_rad: float) -> float:
-        return float(self._stream.step(angle_rad))
-
-
 def run_trajectory(
     new_plant: Callable[[], Stepper], ff: Any, gains: FeedbackGains | None, trajectory: str
 ) -> dict[str, Any]:
@@ -105,7 +92,8 @@ def run_trajectory(
     desired = np.asarray(get_preset(trajectory).generate(RATE_HZ).values_si)
     before = lead_in(float(desired[0]), RATE_HZ, 1.0, 1.0)
     plan = np.concatenate([before, desired])
-    preview = int(getattr(ff, "preview_samples", 0))
+    # The compensator reads the plan this far ahead (ClosedLoop takes it as a sample).
+    preview = round(float(getattr(ff, "preview_s", 0.0)) * RATE_HZ)
     loop = ClosedLoop(
         ff,
         gains,
@@ -175,7 +163,9 @@ def train_feedforwards(
             model = model_class(kind)(**settings)
             print(f"   training {kind} on {case.plant.name} ...", flush=True)
             model.fit([case.train], progress=False)
-            out[kind] = _Ff(model.stream(), model.preview_samples, kind)
+            out[kind] = ModelCompensator(
+                model.stream(), model.preview_samples / RATE_HZ, 1.0 / RATE_HZ, kind
+            )
         took[kind] = time.perf_counter() - start
     return out, took
 
@@ -366,7 +356,6 @@ def main() -> None:
     ours_ffs = {kind: load_compensator(kind, "") for kind in kinds}
     for ff in ours_ffs.values():
         period = ff.sample_period_s
-        ff.preview_samples = round(ff.preview_s * RATE_HZ)  # type: ignore[attr-defined]
         assert period is None or abs(period * RATE_HZ - 1.0) < 1e-9
     gains = FeedbackGains.load(SHIPPED_GAINS)
     results["plants"]["ours"] = {

@@ -34,6 +34,7 @@ from test_compensator import (
 from trajectory_msgs.msg import JointTrajectory
 
 from catheter_control import qos
+from catheter_control.models import SHIPPED_GAINS, shipped_model_dir
 from catheter_control.qos import RECORD
 from catheter_models.contract import (
     ANGLE_DESIRED,
@@ -43,7 +44,7 @@ from catheter_models.contract import (
     TIP_ANGLE,
     TRAJECTORY,
 )
-from catheter_models.feedback import FeedbackGains
+from catheter_models.feedback import GAINS_FILE, FeedbackGains
 
 pytestmark = [
     pytest.mark.slow,
@@ -55,6 +56,8 @@ pytestmark = [
 # the bound is half the feedforward's error: it fails a feedback that does nothing or makes
 # things worse, and tolerates a loaded machine.
 FEEDBACK_BOUND_DEG = 0.9
+SHIPPED = shipped_model_dir(SHIPPED_GAINS)
+"""The shipped gains (tuned on the simulated rig), which the nodes here load."""
 
 
 def test_feedback_in_the_graph_at_1_khz_halves_the_feedforwards_error(
@@ -104,10 +107,7 @@ def test_a_frozen_laser_is_caught_by_the_feedbacks_authority(
         {"compensator": "none", "feedback": "pi", "require_tip_angle": True},
         relay_angle=True,
     )
-    gains = FeedbackGains.load(
-        Path(__file__).resolve().parents[2]
-        / "src/catheter_control/catheter_control/data/feedback/feedback.json"
-    )
+    gains = FeedbackGains.load(SHIPPED)
     with Probe(children.domain_id) as probe:
         relay = children.procs["angle_relay"]
         commands = probe.subscribe(FluidPressure, PRESSURE_COMMAND.name, RECORD)
@@ -153,12 +153,7 @@ def test_a_frozen_laser_is_caught_by_the_feedbacks_authority(
 def test_gains_with_a_sign_error_are_refused_at_start(
     children: Children, fault: FaultRecord, tmp_path: Path
 ) -> None:
-    raw = json.loads(
-        (
-            Path(__file__).resolve().parents[2]
-            / "src/catheter_control/catheter_control/data/feedback/feedback.json"
-        ).read_text()
-    )
+    raw = json.loads((SHIPPED / GAINS_FILE).read_text())
     raw["kp_pa_per_rad"] = -raw["kp_pa_per_rad"]
     bad = tmp_path / "feedback.json"
     bad.write_text(json.dumps(raw))
