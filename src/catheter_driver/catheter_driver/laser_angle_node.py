@@ -1,10 +1,13 @@
 """``laser_angle``: the laser distance sensor, through its ADC bridge, as bend angle.
 
-Lifecycle-managed like ``valve_driver``. Publishes ``tip/distance`` (sensor_msgs/Range) and
-``tip/angle`` (sensor_msgs/JointState, joint ``bend``) for every sample, stamped at its
-sampling instant (rebuilt from the bridge's counter). The angle needs eq. 3.2's straight-tip
-reference: ``~/zero`` (std_srvs/Trigger) measures it with the muscle vented and stores it in
-``calibration_file``, which is loaded at configure. Until then only the distance is published.
+Lifecycle-managed like ``valve_driver`` (*configure* opens the ADC bridge from the ``adc.*``
+parameters and loads the calibration, *activate* starts reading and publishing, *deactivate*
+stops, *cleanup*/*shutdown* close the bridge; ``autostart:=true`` for a node run alone).
+Publishes ``tip/distance`` (sensor_msgs/Range) and ``tip/angle`` (sensor_msgs/JointState,
+joint ``bend``) for every sample, stamped at its sampling instant (rebuilt from the bridge's
+counter). The angle needs eq. 3.2's straight-tip reference: ``~/zero`` (std_srvs/Trigger)
+measures it with the muscle vented and stores it in ``calibration_file``, which is loaded at
+configure. Until then only the distance is published.
 Parameters ``laser.m_per_v``, ``laser.offset_m`` (eq. 3.1) and ``laser.length_m``,
 ``laser.height_m`` (eq. 3.3) default to the thesis's constants.
 """
@@ -22,7 +25,11 @@ from std_srvs.srv import Trigger
 from catheter_driver import diagnostics, messages, qos
 from catheter_driver.devices.factory import make_laser_adc
 from catheter_driver.laser_core import Calibration, LaserAngleCore, ZeroingError
-from catheter_driver.lifecycle_util import device_options
+from catheter_driver.lifecycle_util import (
+    declare_autostart,
+    declare_device_options,
+    device_options,
+)
 from catheter_driver.loop_node import declare_rt_priority, make_process_realtime
 from catheter_driver.node_main import run_node
 from catheter_driver.params import declare_float, declare_plain
@@ -51,7 +58,8 @@ class LaserAngleNode(LifecycleNode):
     """Thin lifecycle shell over :class:`LaserAngleCore`."""
 
     def __init__(self) -> None:
-        super().__init__("laser_angle", automatically_declare_parameters_from_overrides=True)
+        super().__init__("laser_angle")
+        declare_device_options(self, "adc")
         self.rate_hz = declare_float(self, "rate_hz", _RATE)
         self.geometry = LaserGeometry(
             m_per_v=declare_float(self, "laser.m_per_v", _M),
@@ -72,7 +80,7 @@ class LaserAngleNode(LifecycleNode):
         self.zero_s = declare_float(self, "zero_duration_s", _ZERO_S)
         self.zero_max_pa = declare_float(self, "zero_max_pressure_pa", _ZERO_PA)
         self.ambient_pa = declare_float(self, "ambient_pressure_pa", _AMB)
-        self.autostart = bool(declare_plain(self, "autostart", True, "configure+activate at start"))
+        self.autostart = declare_autostart(self)
         self.rt_priority = declare_rt_priority(self)
         self.core: LaserAngleCore | None = None
         self._loop: DeadlineLoop | None = None
@@ -85,8 +93,8 @@ class LaserAngleNode(LifecycleNode):
             float(self.geometry.voltage_to_distance_m(0.0)),
             float(self.geometry.voltage_to_distance_m(10.0)),
         )
-        self._pub_distance = self.create_publisher(Range, TIP_DISTANCE.name, qos.STREAM)
-        self._pub_angle = self.create_publisher(JointState, TIP_ANGLE.name, qos.STREAM)
+        self._pub_distance = qos.overridable_publisher(self, Range, TIP_DISTANCE.name, qos.STREAM)
+        self._pub_angle = qos.overridable_publisher(self, JointState, TIP_ANGLE.name, qos.STREAM)
         self._pub_diag = diagnostics.create_diagnostics_publisher(self)
         self.create_subscription(
             FluidPressure, PRESSURE_MEASURED.name, self._on_pressure, qos_profile_sensor_data

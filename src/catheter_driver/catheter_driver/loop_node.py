@@ -4,8 +4,10 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from rclpy.lifecycle import LifecycleNode
 from rclpy.node import Node
 
+from catheter_driver.lifecycle_util import autostart_once, declare_autostart
 from catheter_driver.params import declare_int
 from catheter_driver.rt_loop import (
     DEFAULT_RT_PRIORITY,
@@ -89,4 +91,63 @@ class LoopNode(Node):
         """
         if self._loop is not None:
             self._loop.stop()
+        super().destroy_node()
+
+
+class LifecycleLoopNode(LifecycleNode):
+    """Base for lifecycle nodes whose work runs on a :class:`DeadlineLoop`.
+
+    The loop exists only while the node is active: :meth:`start_loop` (from ``on_activate``)
+    makes a new one, :meth:`stop_loop` (from ``on_deactivate``) ends it; a thread cannot be
+    restarted, and a re-activated node must not replay the ticks it missed while inactive.
+    Parameters ``rt_priority`` (as :class:`LoopNode`) and ``autostart`` (default false).
+    """
+
+    def __init__(self, name: str) -> None:
+        super().__init__(name)
+        self._loop: DeadlineLoop | None = None
+        self._stamper = MonotonicStamper(self.get_clock().now().nanoseconds)
+        self.rt_priority = declare_rt_priority(self)
+        self.autostart = declare_autostart(self)
+        self.transition_failure = ""
+        """Why the last transition failed ('' if none did): logged, and raised by autostart."""
+
+    def fail_transition(self, what: str, reason: str) -> None:
+        """Log a failed transition by name with its reason, and keep the reason."""
+        self.transition_failure = f"{what} failed: {reason}"
+        self.get_logger().error(self.transition_failure)
+
+    def start_loop(self, rate_hz: float, tick: Callable[[int, float], None]) -> DeadlineLoop:
+        """Make and start the node's loop (the node's other threads real time below it)."""
+        make_process_realtime(self, self.rt_priority)
+        self._loop = DeadlineLoop(rate_hz, tick, name=self.get_name(), rt_priority=self.rt_priority)
+        self._loop.start()
+        return self._loop
+
+    def stop_loop(self) -> None:
+        """End the loop, if one runs (idempotent)."""
+        if self._loop is not None:
+            self._loop.stop()
+            self._loop = None
+
+    @property
+    def active_loop(self) -> DeadlineLoop | None:
+        """The running loop, or None while the node is not active."""
+        return self._loop
+
+    def stamp_ns(self, mono_s: float) -> int:
+        """ROS time [ns] of a monotonic instant [s], e.g. a tick's deadline."""
+        return self._stamper.ns(mono_s)
+
+    def start(self) -> None:
+        """Called once the process's nodes are built: with ``autostart``, configure+activate.
+
+        A failure raises CatheterError (exit code 2 from ``run_nodes``) with the reason.
+        """
+        if self.autostart:
+            autostart_once(self)
+
+    def destroy_node(self) -> None:
+        """Stop the loop before the publishers go away."""
+        self.stop_loop()
         super().destroy_node()

@@ -22,6 +22,7 @@ from rclpy.experimental.events_executor import EventsExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
+from catheter_driver.params import refuse_undeclared_overrides
 from catheter_models.errors import CatheterError
 
 
@@ -78,7 +79,9 @@ def run_nodes(
 
     The nodes are built inside one rclpy context, in order; a :class:`CatheterError` while
     building one (a refused parameter, a model that fails its hash check) is logged as fatal
-    and gives exit code 2. Nodes with ``start()`` are started once all are built. On the way
+    and gives exit code 2; so is an override a node does not declare (``params.
+    refuse_undeclared_overrides``). Nodes with ``start()`` are started once all are built (a
+    lifecycle node configures and activates itself there only with ``autostart``). On the way
     out every node is closed (``close()``, then ``destroy_node()``, which stops its loops) in
     reverse order, inside the context, so no loop thread publishes into a dead context.
     """
@@ -90,6 +93,9 @@ def run_nodes(
         try:
             for factory in factories:
                 nodes.append(factory())
+                # Every node, whatever it is: a misspelt override must not leave a safety
+                # limit at its default without a word.
+                refuse_undeclared_overrides(nodes[-1])
                 executor.add_node(nodes[-1])
             # What start-up built lives as long as the process: collect once, then freeze it
             # out of the collector's sight. A full collection over it holds the GIL, and so

@@ -7,6 +7,8 @@ node re-checks at start-up to give a message that names the range.
 
 from __future__ import annotations
 
+import difflib
+from collections.abc import Iterable
 from typing import Any
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
@@ -61,11 +63,60 @@ def declare_plain(node: Node, name: str, default: Any, doc: str, read_only: bool
 def _declare(node: Node, name: str, default: Any, descriptor: ParameterDescriptor) -> Any:
     """Declare, or adopt a parameter the node already declared from a command-line override.
 
-    Driver nodes accept arbitrary ``<device>.*`` options, so they let rclpy declare every
-    override automatically; a named parameter given on the command line then exists before
-    we declare it. Its value is still checked against the range by the caller.
+    Driver nodes declare their ``<device>.*`` options from the overrides (see
+    ``lifecycle_util.declare_device_options``), and rclpy declares ``qos_overrides.*`` as
+    publishers are made, so a name may exist before we declare it. Its value is still checked
+    against the range by the caller.
     """
     if node.has_parameter(name):
         value = node.get_parameter(name).value
         return default if value is None else value
     return node.declare_parameter(name, default, descriptor).value
+
+
+ALWAYS_ALLOWED = ("use_sim_time",)
+"""Parameters every rclpy node declares itself (an override may name them at any node)."""
+
+QOS_OVERRIDES_PREFIX = "qos_overrides."
+"""REP 2003's QoS parameters (``qos_overrides./ns/topic.publisher.depth``). rclpy declares
+them for the topics a node makes overridable, and only when that topic is created; one for a
+topic the node does not offer is left unused, as everywhere in ROS 2."""
+
+
+def undeclared_overrides(node: Node, allowed_prefixes: Iterable[str] = ()) -> list[str]:
+    """Names of command-line or params-file overrides the node never declared.
+
+    A misspelt ``max_pressure_p`` would otherwise leave the safety limit at its default
+    without a word: rclpy keeps undeclared overrides to itself.
+    """
+    prefixes = (QOS_OVERRIDES_PREFIX, *allowed_prefixes)
+    overrides: dict[str, Any] = getattr(node, "_parameter_overrides", {})
+    return sorted(
+        name
+        for name in overrides
+        if not node.has_parameter(name)
+        and name not in ALWAYS_ALLOWED
+        and not name.startswith(prefixes)
+    )
+
+
+def refuse_undeclared_overrides(node: Node, allowed_prefixes: Iterable[str] = ()) -> None:
+    """Raise ParameterError naming every override ``node`` does not declare, with a close match.
+
+    Called once a node has declared everything it reads (``node_main.run_nodes`` does it for
+    every node it builds), so it sees the node's full set.
+    """
+    unknown = undeclared_overrides(node, allowed_prefixes)
+    if not unknown:
+        return
+    # rclpy has no public list of a node's declared names (list_parameters answers a service).
+    declared = sorted(n for n in node._parameters if not n.startswith(QOS_OVERRIDES_PREFIX))
+    parts = []
+    for name in unknown:
+        close = difflib.get_close_matches(name, declared, n=1, cutoff=0.6)
+        parts.append(f"{name!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
+    plural = "s" if len(parts) > 1 else ""
+    raise ParameterError(
+        f"{node.get_fully_qualified_name()}: unknown parameter{plural} {', '.join(parts)} "
+        "(refused: an override the node does not read would be silently ignored)"
+    )

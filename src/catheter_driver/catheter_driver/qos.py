@@ -10,7 +10,16 @@ sensor stream, and nothing could ask for them again.
 
 from __future__ import annotations
 
+import copy
+from typing import Any
+
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.node import Node
+from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos_overriding_options import InvalidQosOverridesError, QoSOverridingOptions
+
+from catheter_models.errors import ParameterError
 
 STREAM_DEPTH = 500
 """Samples a stream's publisher keeps for re-sending, and a keeping subscriber queues: 2 s at
@@ -48,3 +57,43 @@ RECORD = QoSProfile(
 """The recorder's request: every sample, re-sent if lost. It matches reliable publishers only,
 so the recorder falls back to ``KEEP_EVERY_SAMPLE`` on a topic where a publisher offers best
 effort (and says so)."""
+
+
+def _valid_depth(profile: QoSProfile) -> Any:
+    from rcl_interfaces.msg import SetParametersResult
+
+    result = SetParametersResult(successful=True)
+    if profile.history == HistoryPolicy.KEEP_LAST and profile.depth < 1:
+        result.successful = False
+        result.reason = f"depth must be >= 1 with history keep_last, got {profile.depth}"
+    return result
+
+
+def overridable_publisher(node: Node, msg_type: Any, topic: str, profile: QoSProfile) -> Publisher:
+    """A publisher whose history, depth and reliability REP 2003 parameters may override.
+
+    ``-p qos_overrides./catheter/pressure/measured.publisher.depth:=1000`` (the topic's full
+    name; rclpy's naming). The profile is copied: rclpy writes the overrides into the profile
+    it is given, and ours are shared module constants. A bad value is refused at start-up
+    with the parameter's name (ParameterError, exit code 2).
+    """
+    name = f"qos_overrides.{node.resolve_topic_name(topic)}.publisher"
+    try:
+        return node.create_publisher(
+            msg_type,
+            topic,
+            copy.copy(profile),
+            qos_overriding_options=QoSOverridingOptions.with_default_policies(
+                callback=_valid_depth
+            ),
+        )
+    except (
+        InvalidParameterTypeException,
+        InvalidParameterValueException,
+        InvalidQosOverridesError,
+        RuntimeError,
+        ValueError,
+    ) as exc:
+        raise ParameterError(
+            f"QoS override refused ({name}.history/depth/reliability): {exc}"
+        ) from None

@@ -1,25 +1,33 @@
-"""``sim_hardware``: the simulated rig as a ROS 2 node.
+"""``sim_hardware``: the simulated rig as a ROS 2 lifecycle node.
 
 Subscribes ``pressure/command``; publishes ``pressure/measured``, ``tip/distance`` and
 ``tip/angle`` at the plant's sample rate (250 Hz), stamped on the plant's clock, and its health
 on ``/diagnostics``. Parameters ``effects.<name>.enabled`` and ``effects.<name>.<param>``
 switch and size every effect of docs/simulated_rig.md; ``rig.<param>`` sets the rig.
+
+Lifecycle: *configure* builds the simulated plant (the "device") and warms it up; *activate*
+starts the sample loop (publishing, taking commands); *deactivate* stops it, so nothing is
+published or applied; *cleanup*/*shutdown* drop the plant. Commands that arrive while
+inactive are counted away, never applied. ``autostart:=true`` configures and activates at
+start-up for a node run alone.
 """
 
 from __future__ import annotations
 
 import time
 
+from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import FluidPressure, JointState, Range
 
 from catheter_driver import diagnostics, messages, qos
-from catheter_driver.loop_node import LoopNode
+from catheter_driver.loop_node import LifecycleLoopNode
 from catheter_driver.node_main import run_node
 from catheter_driver.params import declare_float, declare_int, declare_plain
 from catheter_driver.polled import PressureCommands
 from catheter_driver.rt_loop import LatencyWindow
 from catheter_driver.sim_hardware import SimHardware
 from catheter_models.contract import PRESSURE_MEASURED, TIP_ANGLE, TIP_DISTANCE
+from catheter_models.errors import CatheterError
 from catheter_models.plant.config import EFFECTS, RIG_PARAMS, ParamSpec, PlantConfig
 
 _MAX_PRESSURE = ParamSpec(
@@ -30,8 +38,8 @@ _TIMEOUT = ParamSpec(
 )
 
 
-class SimHardwareNode(LoopNode):
-    """Thin ROS shell over :class:`SimHardware`."""
+class SimHardwareNode(LifecycleLoopNode):
+    """Thin lifecycle shell over :class:`SimHardware`."""
 
     def __init__(self) -> None:
         super().__init__("sim_hardware")
@@ -50,51 +58,95 @@ class SimHardwareNode(LoopNode):
             }
             config = config.with_effect(name, enabled=enabled, **values)
         self.ambient_pa = rig["ambient_pressure_pa"]
-        self.hw = SimHardware(
-            config,
-            max_pressure_pa=declare_float(self, "max_pressure_pa", _MAX_PRESSURE),
-            command_timeout_s=declare_float(self, "command_timeout_s", _TIMEOUT),
-        )
+        self.rate_hz = rig["sample_rate_hz"]
+        self._max_pressure_pa = declare_float(self, "max_pressure_pa", _MAX_PRESSURE)
+        self._command_timeout_s = declare_float(self, "command_timeout_s", _TIMEOUT)
         self.config = config
-        geom = self.hw.plant.geometry
+        self.hw: SimHardware | None = None
+        self._range_limits_m = (0.0, 0.0)
+
+        # Sensor streams: QoS overridable by parameter (REP 2003).
+        self._pub_pressure = qos.overridable_publisher(
+            self, FluidPressure, PRESSURE_MEASURED.name, qos.STREAM
+        )
+        self._pub_distance = qos.overridable_publisher(self, Range, TIP_DISTANCE.name, qos.STREAM)
+        self._pub_angle = qos.overridable_publisher(self, JointState, TIP_ANGLE.name, qos.STREAM)
+        self._pub_diag = diagnostics.create_diagnostics_publisher(self)
+        self._commands = PressureCommands(self)  # taken by the loop, see PressureCommands
+        self.commands_ignored_inactive = 0
+        """Commands that arrived while the rig was not active: never applied."""
+        self._latency = LatencyWindow()
+        self.create_timer(1.0, self._publish_diagnostics)
+
+    # -- lifecycle -----------------------------------------------------------------------
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Build the simulated plant and warm it up."""
+        try:
+            hw = SimHardware(
+                self.config,
+                max_pressure_pa=self._max_pressure_pa,
+                command_timeout_s=self._command_timeout_s,
+            )
+            hw.plant.warm_up()
+        except (CatheterError, ValueError) as exc:
+            self.fail_transition("configure", str(exc))
+            return TransitionCallbackReturn.FAILURE
+        geom = hw.plant.geometry
         self._range_limits_m = (
             float(geom.voltage_to_distance_m(0.0)),
             float(geom.voltage_to_distance_m(10.0)),
         )
-
-        self._pub_pressure = self.create_publisher(
-            FluidPressure, PRESSURE_MEASURED.name, qos.STREAM
-        )
-        self._pub_distance = self.create_publisher(Range, TIP_DISTANCE.name, qos.STREAM)
-        self._pub_angle = self.create_publisher(JointState, TIP_ANGLE.name, qos.STREAM)
-        self._pub_diag = diagnostics.create_diagnostics_publisher(self)
-        self._commands = PressureCommands(self)  # taken by the loop, see PressureCommands
-        self.hw.plant.warm_up()
-        self._latency = LatencyWindow()
-        self.create_loop(rig["sample_rate_hz"], self._tick)
-        self.create_timer(1.0, self._publish_diagnostics)
-        on = [n for n in EFFECTS if config.enabled(n)]
+        self.hw = hw
+        on = [n for n in EFFECTS if self.config.enabled(n)]
         self.get_logger().info(
-            f"simulated rig at {rig['sample_rate_hz']:g} Hz, effects on: {', '.join(on) or 'none'}"
+            f"simulated rig at {self.rate_hz:g} Hz, effects on: {', '.join(on) or 'none'}"
         )
+        return TransitionCallbackReturn.SUCCESS
 
-    def _on_command(self, msg: FluidPressure, now_s: float) -> None:
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Start sampling, publishing and taking commands."""
+        assert self.hw is not None  # the state machine activates configured nodes only
+        # Whatever came while inactive is old news: counted, never applied.
+        self.commands_ignored_inactive += len(self._commands.take())
+        self.hw.reset_ticks()
+        self.start_loop(self.rate_hz, self._tick)
+        return super().on_activate(state)
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Stop sampling: nothing published, no command applied."""
+        self.stop_loop()
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Drop the plant."""
+        self.stop_loop()
+        self.hw = None
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Stop and drop the plant."""
+        return self.on_cleanup(state)
+
+    def _on_command(self, hw: SimHardware, msg: FluidPressure, now_s: float) -> None:
         self._latency.add((self.stamp_ns(now_s) - messages.ns_from_time(msg.header.stamp)) * 1e-9)
         gauge_pa = messages.gauge_pa_from(msg, self.ambient_pa)
-        if not self.hw.command(gauge_pa, now_s, messages.ns_from_time(msg.header.stamp)):
-            self.get_logger().warning(self.hw.last_refusal, throttle_duration_sec=1.0)
+        if not hw.command(gauge_pa, now_s, messages.ns_from_time(msg.header.stamp)):
+            self.get_logger().warning(hw.last_refusal, throttle_duration_sec=1.0)
 
     def _tick(self, k: int, deadline_s: float) -> None:
+        hw, loop = self.hw, self.active_loop
+        if hw is None or loop is None:
+            return
         commands = self._commands.take()
         if commands:
             now_s = time.monotonic()
             for msg in commands:
-                self._on_command(msg, now_s)
+                self._on_command(hw, msg, now_s)
         # The rig samples whether or not this thread ran on time: after an overrun, step
         # through every missed sample and publish the backlog with its true stamps, as a
         # sensor driver drains its buffer. Stamps are the sampling instants (monotonic
         # deadlines mapped to ROS time), so bags align across nodes.
-        for sample_time_s, sample in self.hw.step_through(k, deadline_s, self.loop.period_s):
+        for sample_time_s, sample in hw.step_through(k, deadline_s, loop.period_s):
             stamp_ns = self.stamp_ns(sample_time_s)
             self._pub_pressure.publish(
                 messages.fluid_pressure(sample.pressure_measured_pa, stamp_ns, "", self.ambient_pa)
@@ -112,29 +164,42 @@ class SimHardwareNode(LoopNode):
             commands.destroy()
 
     def _publish_diagnostics(self) -> None:
-        counters = self.hw.counters()
-        stats = self.loop.stats()
+        hw, loop = self.hw, self.active_loop
+        if hw is None or loop is None:
+            diagnostics.publish_status(
+                self._pub_diag,
+                self,
+                level=diagnostics.WARN,
+                message=self.transition_failure
+                or ("configured, not active" if hw is not None else "not configured"),
+                values={"commands_ignored_inactive": self.commands_ignored_inactive},
+                hardware_id="sim_hardware",
+            )
+            return
+        counters = hw.counters()
+        stats = loop.stats()
         level = diagnostics.OK
         message = "running"
-        if self.loop.error is not None:
-            level, message = diagnostics.ERROR, f"sample loop died: {self.loop.error!r}"
-        elif self.hw.venting:
+        if loop.error is not None:
+            level, message = diagnostics.ERROR, f"sample loop died: {loop.error!r}"
+        elif hw.venting:
             level, message = diagnostics.WARN, "watchdog: no pressure command, valve vented"
         elif counters.refused_nonfinite or counters.refused_out_of_order:
-            level, message = diagnostics.WARN, self.hw.last_refusal
+            level, message = diagnostics.WARN, hw.last_refusal
         values: dict[str, object] = {
             "commands_received": counters.received,
             "commands_refused_nonfinite": counters.refused_nonfinite,
             "commands_refused_out_of_order": counters.refused_out_of_order,
             "commands_clamped": counters.clamped,
             "watchdog_vents": counters.watchdog_vents,
-            "venting": self.hw.venting,
-            "command_bar": f"{self.hw.command_pa / 1e5:.4f}",
-            "realtime": self.realtime,
+            "commands_ignored_inactive": self.commands_ignored_inactive,
+            "venting": hw.venting,
+            "command_bar": f"{hw.command_pa / 1e5:.4f}",
+            "realtime": loop.realtime,
             "samples": stats.ticks,
             "missed_deadlines": stats.missed,
             "lateness_p99_ms": f"{stats.lateness_p99_s * 1e3:.3f}",
-            "behind_max_ms": f"{self.loop.take_worst_behind_s() * 1e3:.3f}",
+            "behind_max_ms": f"{loop.take_worst_behind_s() * 1e3:.3f}",
             **self._latency.summary_ms(),
         }
         values.update(self.config.describe())

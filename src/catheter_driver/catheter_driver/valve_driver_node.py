@@ -4,8 +4,9 @@ Lifecycle-managed. *configure* opens both devices (backends and options from the
 ``valve.*`` and ``transmitter.*`` parameters); *activate* starts the control loop (watchdog,
 clamp, slew, set-point write, at ``rate_hz``) and the transmitter poll, which publishes
 ``pressure/measured``; *deactivate*, *cleanup*, *shutdown* and *error* leave the valve vented.
-With ``autostart`` (default) the node configures and activates itself, retrying until the
-devices answer.
+By default it waits, unconfigured, for a lifecycle manager (a launch file, ``bringup``,
+``ros2 lifecycle set``); with ``autostart:=true`` (a node run alone) it configures and
+activates itself, retrying until the devices answer.
 
 Subscribes ``pressure/command``. Services ``~/vent`` (std_srvs/Trigger) and ``~/enable``
 (std_srvs/SetBool). Health, device counters and the reason for any venting on
@@ -22,7 +23,11 @@ from std_srvs.srv import SetBool, Trigger
 
 from catheter_driver import diagnostics, messages, qos
 from catheter_driver.devices.factory import make_transmitter, make_valve
-from catheter_driver.lifecycle_util import device_options
+from catheter_driver.lifecycle_util import (
+    declare_autostart,
+    declare_device_options,
+    device_options,
+)
 from catheter_driver.loop_node import declare_rt_priority, make_process_realtime
 from catheter_driver.node_main import run_node
 from catheter_driver.params import declare_float, declare_plain
@@ -47,10 +52,12 @@ class ValveDriverNode(LifecycleNode):
     """Thin lifecycle shell over :class:`ValveDriverCore`."""
 
     def __init__(self) -> None:
-        super().__init__("valve_driver", automatically_declare_parameters_from_overrides=True)
+        super().__init__("valve_driver")
+        declare_device_options(self, "valve")
+        declare_device_options(self, "transmitter")
         self.rate_hz = declare_float(self, "rate_hz", _RATE)
         self.ambient_pa = declare_float(self, "ambient_pressure_pa", _AMB)
-        self.autostart = bool(declare_plain(self, "autostart", True, "configure+activate at start"))
+        self.autostart = declare_autostart(self)
         self.allow_enable = bool(
             declare_plain(self, "allow_enable_service", True, "offer ~/enable (it re-arms motion)")
         )
@@ -68,8 +75,8 @@ class ValveDriverNode(LifecycleNode):
         self._latency = LatencyWindow()
         self._last_tick_state = "unconfigured"
         self._last_reason = "not configured"
-        self._pub_measured = self.create_publisher(
-            FluidPressure, PRESSURE_MEASURED.name, qos.STREAM
+        self._pub_measured = qos.overridable_publisher(
+            self, FluidPressure, PRESSURE_MEASURED.name, qos.STREAM
         )
         self._pub_diag = diagnostics.create_diagnostics_publisher(self)
         self._commands = PressureCommands(self)  # taken by the control loop
