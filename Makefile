@@ -11,7 +11,8 @@ PRESET ?= traj_descending_sine
 setup: $(VENV)/.installed
 
 $(VENV)/.installed: requirements.txt requirements-dev.txt scripts/setup_env.sh \
-		src/catheter_models/setup.py src/catheter_driver/setup.py src/catheter_control/setup.py
+		src/catheter_models/setup.py src/catheter_driver/setup.py src/catheter_control/setup.py \
+		scripts/build_interfaces.sh $(shell find ros2_ws/interfaces -type f)
 	scripts/setup_env.sh $(VENV)
 
 ## The main job: bring up the simulated rig as separate ROS 2 processes, follow a thesis

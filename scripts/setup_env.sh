@@ -18,6 +18,7 @@ fi
 pip=("$venv/bin/python" -m pip --disable-pip-version-check -q)
 echo "setup: installing dependencies (ROS 2 Kilted wheels, numpy/scipy/numba, mcap, rosbags)"
 "${pip[@]}" install -r "$here/requirements-dev.txt"
+"$here/scripts/build_interfaces.sh" "$venv"  # control_msgs, tf2_msgs: no wheel has them
 echo "setup: installing catheter_models, catheter_driver, catheter_control"
 "${pip[@]}" install --no-deps -e "$here/src/catheter_models" -e "$here/src/catheter_driver" \
   -e "$here/src/catheter_control"

@@ -65,6 +65,8 @@ ROSDEP_KEYS: dict[str, str] = {
     "ament_index_python": "ament_index_python",
     "launch": "launch",
     "launch_ros": "launch_ros",
+    "control_msgs": "control_msgs",
+    "tf2_msgs": "tf2_msgs",
 }
 """Import root -> rosdep key. Check a new key in ros/rosdistro before adding it here."""
 
@@ -82,6 +84,8 @@ ROS_PACKAGES = frozenset(
         "ament_index_python",
         "launch",
         "launch_ros",
+        "control_msgs",
+        "tf2_msgs",
     }
 )
 """Keys that are ROS packages. They may stand without an import (a message package a node
