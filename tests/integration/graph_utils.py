@@ -54,8 +54,16 @@ def ros_env(domain_id: int, log_dir: Path) -> dict[str, str]:
 
 
 def node_argv(module: str, params: Mapping[str, object] | None = None) -> list[str]:
-    """``python -m <module> --ros-args -r __ns:=/catheter -p k:=v ...`` (as bringup does)."""
-    return NodeSpec(module.rsplit(".", 1)[-1], module, dict(params or {})).argv(DEFAULT_NAMESPACE)
+    """``python -m <module> --ros-args -r __ns:=/catheter -p k:=v ...`` for a node run alone.
+
+    A lifecycle node gets ``autostart:=true`` (unless ``params`` says otherwise): started
+    alone, nothing else configures and activates it. Graphs started through
+    :meth:`Children.graph` are driven through the lifecycle services by ``bringup``'s manager.
+    """
+    spec = NodeSpec(module.rsplit(".", 1)[-1], module, dict(params or {}))
+    if spec.lifecycle:
+        spec.params.setdefault("autostart", True)
+    return spec.argv(DEFAULT_NAMESPACE)
 
 
 def _stop(proc: subprocess.Popen[bytes], sig: int = signal.SIGINT, timeout_s: float = 10.0) -> int:

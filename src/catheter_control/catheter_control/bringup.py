@@ -4,26 +4,42 @@ Separate processes by default (what a lab runs, and what the integration tests c
 composed in one process with ``--compose`` (one executor, less start-up cost). The graph is
 ``sim_hardware``, ``compensator`` and, given a bag path, ``recorder``, all in one namespace.
 
-Shutdown order matters for safety and for the record: the compensator stops first (the
-simulated driver's watchdog then vents), then the rig, and the recorder last so the bag holds
-the vent and is closed cleanly.
+The rig and the compensator are lifecycle nodes: once their processes are up, ``bringup``
+configures each, then activates each, in start order, through their ``change_state``
+services (catheter_control.lifecycle_client); a failed transition stops the graph and is
+reported with the node's name and its reason.
+
+Shutdown order matters for safety and for the record: the compensator is deactivated first
+(it ramps the pressure down while the rig still runs), then every node is stopped in reverse
+start order: the rig, and the recorder last so the bag holds the ramp-down and is closed
+cleanly.
+
+ROS arguments after ``--ros-args`` go to every node (``-r __ns:=/x`` sets the namespace).
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import os
 import signal
 import subprocess
 import sys
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
+from typing import TYPE_CHECKING
 
 from catheter_models.contract import DEFAULT_NAMESPACE
+from catheter_models.errors import CatheterError
+
+if TYPE_CHECKING:
+    from rclpy.node import Node
+
+    from catheter_control.lifecycle_client import ManagerContext
 
 Params = Mapping[str, object]
 
@@ -37,6 +53,24 @@ def _ros_value(value: object) -> str:
     return repr(value)
 
 
+LIFECYCLE_MODULES = frozenset(
+    {
+        "catheter_driver.sim_hardware_node",
+        "catheter_driver.valve_driver_node",
+        "catheter_driver.laser_angle_node",
+        "catheter_control.compensator_node",
+    }
+)
+"""Nodes that wait, unconfigured, for a manager to configure and activate them."""
+
+SIM_COMPENSATOR_PARAMS: dict[str, object] = {"require_tip_angle": True}
+"""What ``bringup`` and sim.launch.py give the compensator beyond its defaults: the simulated
+rig has a laser, so a run stops if tip/angle goes quiet (a patient's catheter would not)."""
+
+DEACTIVATE_FIRST = ("compensator",)
+"""Deactivated before any process is stopped: the compensator ramps the pressure down."""
+
+
 @dataclass
 class NodeSpec:
     """One node of the graph: its module (with a ``main``) and parameters."""
@@ -45,12 +79,21 @@ class NodeSpec:
     module: str
     params: dict[str, object] = field(default_factory=dict)
 
-    def argv(self, namespace: str) -> list[str]:
-        """Command line that runs the node with this interpreter."""
+    @property
+    def lifecycle(self) -> bool:
+        """Whether the node is a lifecycle node (configured and activated by its launcher)."""
+        return self.module in LIFECYCLE_MODULES
+
+    def argv(self, namespace: str, ros_args: Sequence[str] = ()) -> list[str]:
+        """Command line that runs the node with this interpreter (``ros_args`` appended)."""
         args = [sys.executable, "-m", self.module, "--ros-args", "-r", f"__ns:={namespace}"]
         for key, value in self.params.items():
             args += ["-p", f"{key}:={_ros_value(value)}"]
-        return args
+        return args + list(ros_args)
+
+    def full_name(self, namespace: str) -> str:
+        """``/catheter/compensator``."""
+        return f"{namespace.rstrip('/')}/{self.name}"
 
 
 def sim_graph_specs(
@@ -181,6 +224,8 @@ class ProcessGraph:
         namespace: ROS namespace of every node.
         log_dir: where each node's stdout/stderr go (``<name>.log``); inherited if None.
         env: extra environment (e.g. ``ROS_DOMAIN_ID``).
+        ros_args: more ROS arguments for every node (after its own).
+        manage_lifecycle: configure and activate the lifecycle nodes in :meth:`start`.
     """
 
     def __init__(
@@ -189,15 +234,63 @@ class ProcessGraph:
         namespace: str = DEFAULT_NAMESPACE,
         log_dir: Path | None = None,
         env: Mapping[str, str] | None = None,
+        *,
+        ros_args: Sequence[str] = (),
+        manage_lifecycle: bool = True,
     ) -> None:
         self.specs = list(specs)
         self.namespace = namespace
         self.log_dir = log_dir
         self.env = {**os.environ, **(env or {})}
+        self.ros_args = list(ros_args)
+        self.manage_lifecycle = manage_lifecycle
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
+        self._manager: ManagerContext | None = None
 
     def start(self) -> None:
-        """Start every node."""
+        """Start every node, then configure and activate the lifecycle nodes, in order.
+
+        Raises:
+            LifecycleError: a node failed a transition or exited first; names it and why
+                (every node is stopped before it is raised).
+        """
+        self.spawn()
+        if self.manage_lifecycle:
+            try:
+                self.activate()
+            except BaseException:
+                self.stop()
+                raise
+
+    def _gone(self, full_name: str) -> str | None:
+        for spec in self.specs:
+            if spec.full_name(self.namespace) == full_name:
+                proc = self.procs.get(spec.name)
+                if proc is not None and proc.poll() is not None:
+                    tail = self.log_tail(spec.name, 5)
+                    return f"its process exited with code {proc.returncode}" + (
+                        f"; its log ends:\n{tail}" if tail else ""
+                    )
+        return None
+
+    def activate(self) -> None:
+        """Configure, then activate, every lifecycle node through its services."""
+        from catheter_control.lifecycle_client import ManagerContext
+
+        managed = [s.full_name(self.namespace) for s in self.specs if s.lifecycle]
+        if not managed:
+            return
+        first = [
+            s.full_name(self.namespace)
+            for name in DEACTIVATE_FIRST
+            for s in self.specs
+            if s.name == name and s.lifecycle
+        ]
+        self._manager = ManagerContext(managed, first, self.env, self._gone)
+        self._manager.bring_up()
+
+    def spawn(self) -> None:
+        """Start every node's process (lifecycle nodes then wait, unconfigured)."""
         from catheter_driver.node_main import PARENT_PID_ENV  # imports rclpy: only when used
 
         for spec in self.specs:
@@ -207,7 +300,7 @@ class ProcessGraph:
                 out = (self.log_dir / f"{spec.name}.log").open("wb")
             try:
                 self.procs[spec.name] = subprocess.Popen(
-                    spec.argv(self.namespace),
+                    spec.argv(self.namespace, self.ros_args),
                     stdout=out,
                     stderr=subprocess.STDOUT if out else None,
                     # The nodes watch this pid and shut down cleanly if it dies (kill -9).
@@ -231,7 +324,15 @@ class ProcessGraph:
         return "\n".join(path.read_text(errors="replace").splitlines()[-lines:])
 
     def stop(self, timeout_s: float = 10.0) -> dict[str, int]:
-        """SIGINT each node in reverse start order, escalating to SIGKILL after ``timeout_s``."""
+        """Deactivate the compensator (ramp-down), then SIGINT each node in reverse order.
+
+        A node still running ``timeout_s`` after its SIGINT is killed (SIGKILL).
+        """
+        if self._manager is not None:
+            for failure in self._manager.wind_down():
+                print(f"bringup: {failure}", file=sys.stderr)
+            self._manager.close()
+            self._manager = None
         codes = {}
         for spec in reversed(self.specs):
             proc = self.procs.get(spec.name)
@@ -260,17 +361,21 @@ class ProcessGraph:
         self.stop()
 
 
-def run_composed(specs: Sequence[NodeSpec], namespace: str) -> int:
+def run_composed(specs: Sequence[NodeSpec], namespace: str, ros_args: Sequence[str] = ()) -> int:
     """Run the nodes in this process on one executor until SIGINT/SIGTERM; returns exit code.
 
     Separate processes are the default: with the GIL, one Python process shares one core
-    between every node's loop and callbacks.
+    between every node's loop and callbacks. A lifecycle manager on the same executor
+    configures and activates the lifecycle nodes through their services once all are built,
+    and deactivates the compensator (ramp-down) first on the way out; a failed transition
+    ends the process with exit code 2 and the node's name and reason.
     """
     import importlib
     import tempfile
 
     import yaml
 
+    from catheter_control.lifecycle_client import LifecycleManager
     from catheter_driver.node_main import run_nodes
 
     # Per-node parameters in one process need a params file keyed by the node's full name.
@@ -279,20 +384,64 @@ def run_composed(specs: Sequence[NodeSpec], namespace: str) -> int:
     with tempfile.NamedTemporaryFile("w", suffix=".yaml", delete=False) as fh:
         yaml.safe_dump(params, fh)
     argv = ["bringup", "--ros-args", "-r", f"__ns:={namespace}", "--params-file", fh.name]
-    factories = []
+    argv += list(ros_args)
+    factories: list[Callable[[], Node]] = []
     for spec in specs:
         module = importlib.import_module(spec.module)
         factories.append(
-            next(getattr(module, n) for n in dir(module) if n.endswith("Node") and n != "Node")
+            next(
+                obj
+                for n, obj in vars(module).items()
+                if n.endswith("Node") and getattr(obj, "__module__", "") == module.__name__
+            )
         )
+    managed = [s.full_name(namespace) for s in specs if s.lifecycle]
+    first = [s.full_name(namespace) for s in specs if s.lifecycle and s.name in DEACTIVATE_FIRST]
+    # Built last, so it starts last (every node exists) and is closed first (its close
+    # deactivates the compensator while the other nodes still run).
+    factories.append(lambda: LifecycleManager(managed, first))
     try:
         return run_nodes(factories, argv)
     finally:
         Path(fh.name).unlink(missing_ok=True)
 
 
-def main(argv: list[str] | None = None) -> None:
-    """Entry point of ``ros2 run catheter_control bringup``."""
+def split_ros_args(argv: Sequence[str]) -> tuple[list[str], list[str]]:
+    """``(own arguments, ROS arguments)``: what follows ``--ros-args`` (up to ``--``) is ROS's.
+
+    The ROS arguments are returned without the ``--ros-args`` flag; an empty list if none.
+    """
+    own: list[str] = []
+    ros: list[str] = []
+    in_ros = False
+    for arg in argv:
+        if arg == "--ros-args":
+            in_ros = True
+        elif arg == "--" and in_ros:
+            in_ros = False
+        elif in_ros:
+            ros.append(arg)
+        else:
+            own.append(arg)
+    return own, ros
+
+
+def namespace_from_ros_args(ros_args: Sequence[str], default: str) -> str:
+    """The namespace ``-r __ns:=/x`` (or ``--remap __ns:=/x``) sets, else ``default``."""
+    namespace = default
+    for flag, value in itertools.pairwise(ros_args):
+        if flag in {"-r", "--remap"} and value.startswith("__ns:="):
+            namespace = value.split(":=", 1)[1]
+    return namespace
+
+
+def parse_args(argv: Sequence[str]) -> tuple[argparse.Namespace, list[str]]:
+    """Parse ``bringup``'s command line; returns its options and the ROS arguments for the nodes.
+
+    ``-r __ns:=/x`` after ``--ros-args`` sets the namespace (as ``--namespace /x``); the other
+    ROS arguments are passed to every node.
+    """
+    own, ros_args = split_ros_args(argv)
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--bag", type=Path, help="record to this new bag directory")
     parser.add_argument("--namespace", default=DEFAULT_NAMESPACE)
@@ -305,21 +454,46 @@ def main(argv: list[str] | None = None) -> None:
         metavar="NAME=VALUE",
         help="sim_hardware parameter, e.g. effects.pneumatic_lag.enabled=true",
     )
-    args = parser.parse_args(argv)
+    args = parser.parse_args(own)
+    args.namespace = namespace_from_ros_args(ros_args, args.namespace)
+    ros_args = [
+        a
+        for i, a in enumerate(ros_args)
+        if not a.startswith("__ns:=")
+        and not (
+            a in {"-r", "--remap"}
+            and i + 1 < len(ros_args)
+            and ros_args[i + 1].startswith("__ns:=")
+        )
+    ]
+    return args, ros_args
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point of ``ros2 run catheter_control bringup``."""
+    args, ros_args = parse_args(sys.argv[1:] if argv is None else argv)
     sim_params: dict[str, object] = {}
     for item in args.sim_param:
         key, _, raw = item.partition("=")
         sim_params[key] = json.loads(raw) if raw not in {"true", "false"} else raw == "true"
     specs = sim_graph_specs(
-        args.bag, {"source": "bringup"}, sim_params, with_compensator=not args.no_compensator
+        args.bag,
+        {"source": "bringup"},
+        sim_params,
+        SIM_COMPENSATOR_PARAMS,
+        with_compensator=not args.no_compensator,
     )
     if args.compose:
-        code = run_composed(specs, args.namespace)
+        code = run_composed(specs, args.namespace, ros_args)
         if code:
             raise SystemExit(code)
         return
-    graph = ProcessGraph(specs, args.namespace)
-    graph.start()
+    graph = ProcessGraph(specs, args.namespace, ros_args=ros_args)
+    try:
+        graph.start()
+    except CatheterError as exc:
+        print(f"bringup: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None
     try:
         while not graph.failed():
             time.sleep(0.2)

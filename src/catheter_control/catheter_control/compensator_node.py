@@ -22,7 +22,9 @@ import math
 import threading
 import time
 
+from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from rclpy.qos import qos_profile_sensor_data
+from rclpy.subscription import Subscription
 from sensor_msgs.msg import FluidPressure, JointState
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
@@ -37,8 +39,9 @@ from catheter_control.models import (
     load_feedback,
 )
 from catheter_control.trajectory import TrajectoryLimits, TrajectoryPlan
+from catheter_control.trajectory_action import RunProgress, TrajectoryActionServer
 from catheter_driver import diagnostics, messages
-from catheter_driver.loop_node import LoopNode
+from catheter_driver.loop_node import LifecycleLoopNode
 from catheter_driver.node_main import run_node
 from catheter_driver.params import declare_float, declare_plain
 from catheter_driver.polled import PolledTopics
@@ -74,23 +77,30 @@ _STALE = ParamSpec(
 _AMB = ParamSpec("ambient_pressure_pa", AMBIENT_PRESSURE_PA, 5.0e4, 1.2e5, "ambient pressure [Pa]")
 
 
-class CompensatorNode(LoopNode):
-    """Thin ROS shell over :class:`ControlCore`."""
+class CompensatorNode(LifecycleLoopNode):
+    """Thin lifecycle shell over :class:`ControlCore`.
+
+    *configure* checks the parameters together, loads the model (hash-checked) and the
+    feedback gains, and subscribes; a failure leaves it unconfigured with the reason logged
+    (and on ``/diagnostics``). *activate* starts the control loop: from then on a trajectory
+    is accepted. *deactivate* ramps the pressure down at the slew limit, waits for zero, and
+    stops the loop. *cleanup* and *shutdown* release the model and subscriptions.
+    """
 
     def __init__(self) -> None:
         super().__init__("compensator")
-        kind = str(
+        self.kind = str(
             declare_plain(
                 self, "compensator", DEFAULT_COMPENSATOR, f"one of {', '.join(COMPENSATORS)}"
             )
         )
-        model_dir = str(declare_plain(self, "model_dir", "", "model directory ('' = shipped)"))
+        self.model_dir = str(declare_plain(self, "model_dir", "", "model directory ('' = shipped)"))
         self.feedback_kind = str(
             declare_plain(
                 self, "feedback", "none", f"feedback on tip/angle: one of {', '.join(FEEDBACKS)}"
             )
         )
-        gains_path = str(
+        self.gains_path = str(
             declare_plain(
                 self,
                 "feedback_gains",
@@ -99,11 +109,9 @@ class CompensatorNode(LoopNode):
             )
         )
         self.rate_hz = declare_float(self, "control_rate_hz", _RATE)
-        feedback = load_feedback(self.feedback_kind, gains_path, model_dir, self.rate_hz)
-        pmin = declare_float(self, "min_pressure_pa", _PMIN)
-        pmax = declare_float(self, "max_pressure_pa", _PMAX)
-        if pmin > pmax:
-            raise ParameterError(f"min_pressure_pa {pmin} exceeds max_pressure_pa {pmax}")
+        self.pmin_pa = declare_float(self, "min_pressure_pa", _PMIN)
+        self.pmax_pa = declare_float(self, "max_pressure_pa", _PMAX)
+        self.slew_pa_per_s = declare_float(self, "max_slew_pa_per_s", _SLEW)
         self.limits = TrajectoryLimits(
             max_angle_rad=declare_float(self, "max_angle_rad", _AMAX),
             max_rate_rad_s=declare_float(self, "max_rate_rad_s", _VMAX),
@@ -111,46 +119,21 @@ class CompensatorNode(LoopNode):
         )
         self.ambient_pa = declare_float(self, "ambient_pressure_pa", _AMB)
         self.driver_wait_s = declare_float(self, "driver_wait_s", _WAIT)
-        required = tuple(
-            spec.name
+        self._require = {
+            spec.name: bool(
+                declare_plain(
+                    self,
+                    f"require_{spec.name.replace('/', '_')}",
+                    default,
+                    f"stop when {spec.name} ({why}) goes stale",
+                )
+            )
             for spec, default, why in (
                 (PRESSURE_MEASURED, True, "the valve driver's transmitter"),
                 (TIP_ANGLE, False, "the laser (a patient has no tip sensor)"),
             )
-            if declare_plain(
-                self,
-                f"require_{spec.name.replace('/', '_')}",
-                default,
-                f"stop when {spec.name} ({why}) goes stale",
-            )
-            # Feedback acts on the laser's bend: a run must not go on without it.
-            or (feedback is not None and spec is TIP_ANGLE)
-        )
-        self.watch = SensorWatch(required, declare_float(self, "sensor_timeout_s", _STALE))
-        self._pending: tuple[TrajectoryPlan, float] | None = None
-        self.kind = kind
-        compensator = load_compensator(kind, model_dir)
-        self.model_rate_hz = (
-            0.0 if compensator.sample_period_s is None else 1.0 / compensator.sample_period_s
-        )
-        self.core = ControlCore(
-            compensator,
-            pmin,
-            pmax,
-            declare_float(self, "max_slew_pa_per_s", _SLEW),
-            feedback,
-        )
-        self._angle_measured_rad: float | None = None
-        self._lock = threading.Lock()
-        self._refusals = 0
-        self._last_refusal = ""
-        # The WARN stands until a trajectory starts: a refusal is news until the next run.
-        self._refusal_standing = False
-        self._accepted = 0
-
-        self._pub_cmd = self.create_publisher(FluidPressure, PRESSURE_COMMAND.name, qos.STREAM)
-        self._pub_des = self.create_publisher(JointState, ANGLE_DESIRED.name, qos.STREAM)
-        self._pub_diag = diagnostics.create_diagnostics_publisher(self)
+        }
+        self.sensor_timeout_s = declare_float(self, "sensor_timeout_s", _STALE)
         # Security: with this off nothing on the DDS network can make this node move the
         # catheter (it still holds the line at rest, reports, and answers ~/stop).
         self.accept_trajectories = bool(
@@ -161,10 +144,71 @@ class CompensatorNode(LoopNode):
                 "subscribe to trajectory (false: nothing on the network can move the catheter)",
             )
         )
+        self.core: ControlCore | None = None
+        self.watch = SensorWatch((), self.sensor_timeout_s)
+        self.model_rate_hz = 0.0
+        self._pending: tuple[TrajectoryPlan, float] | None = None
+        self._angle_measured_rad: float | None = None
+        self._lock = threading.Lock()
+        self._refusals = 0
+        self._last_refusal = ""
+        # The WARN stands until a trajectory starts: a refusal is news until the next run.
+        self._refusal_standing = False
+        self._accepted = 0
+        self._trajectory_sub: Subscription[JointTrajectory] | None = None
+        self._action: TrajectoryActionServer | None = None
+        # A plan dropped before it started, and why: the action reports it to its goal.
+        self._dropped: tuple[TrajectoryPlan, str] | None = None
+        self._sensors: PolledTopics | None = None
+        self._angles: PolledTopics | None = None
+
+        # The command stream's QoS is overridable by parameter (REP 2003); angle/desired is
+        # a record of intent, not a stream a driver acts on.
+        self._pub_cmd = qos.overridable_publisher(
+            self, FluidPressure, PRESSURE_COMMAND.name, qos.STREAM
+        )
+        self._pub_des = self.create_publisher(JointState, ANGLE_DESIRED.name, qos.STREAM)
+        self._pub_diag = diagnostics.create_diagnostics_publisher(self)
+        self.create_service(Trigger, "~/stop", self._on_stop)
+        self.create_timer(1.0, self._publish_diagnostics)
+
+    # -- lifecycle -----------------------------------------------------------------------
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Check the parameters together, load and verify the model and gains, subscribe."""
+        try:
+            if self.pmin_pa > self.pmax_pa:
+                raise ParameterError(
+                    f"min_pressure_pa {self.pmin_pa} exceeds max_pressure_pa {self.pmax_pa}"
+                )
+            feedback = load_feedback(
+                self.feedback_kind, self.gains_path, self.model_dir, self.rate_hz
+            )
+            compensator = load_compensator(self.kind, self.model_dir)
+        except CatheterError as exc:
+            self.fail_transition("configure", str(exc))
+            return TransitionCallbackReturn.FAILURE
+        self.transition_failure = ""
+        # Feedback acts on the laser's bend: a run must not go on without it.
+        required = tuple(
+            name
+            for name, wanted in self._require.items()
+            if wanted or (feedback is not None and name == TIP_ANGLE.name)
+        )
+        self.watch = SensorWatch(required, self.sensor_timeout_s)
+        self.model_rate_hz = (
+            0.0 if compensator.sample_period_s is None else 1.0 / compensator.sample_period_s
+        )
+        with self._lock:
+            self.core = ControlCore(
+                compensator, self.pmin_pa, self.pmax_pa, self.slew_pa_per_s, feedback
+            )
         if self.accept_trajectories:
-            self.create_subscription(
+            # Subscribed from configure, not activate: a trajectory latched (transient local)
+            # while the node was not armed is refused once here, never run on activation.
+            self._trajectory_sub = self.create_subscription(
                 JointTrajectory, TRAJECTORY.name, self._on_trajectory, qos.TRAJECTORY
             )
+            self._action = TrajectoryActionServer(self, self)
         else:
             self.get_logger().warning(
                 "accept_trajectories is false: trajectory is not subscribed, the catheter "
@@ -193,9 +237,6 @@ class CompensatorNode(LoopNode):
                 suffix="_angle",
             )
         )
-        self.create_service(Trigger, "~/stop", self._on_stop)
-        self.create_timer(1.0, self._publish_diagnostics)
-        self.create_loop(self.rate_hz, self._tick)
         model_rate = f", model stepped at {self.model_rate_hz:g} Hz" if self.model_rate_hz else ""
         fb_text = (
             ""
@@ -204,9 +245,80 @@ class CompensatorNode(LoopNode):
             f"ki {feedback.gains.ki_pa_per_rad_s:.4g} Pa/(rad s))"
         )
         self.get_logger().info(
-            f"compensator {kind!r} at {self.rate_hz:g} Hz{model_rate}{fb_text}; "
+            f"compensator {self.kind!r} at {self.rate_hz:g} Hz{model_rate}{fb_text}; "
             f"requires {', '.join(required) or 'no sensor stream'}"
         )
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Arm: start the control loop; trajectories are accepted from now on."""
+        self.start_loop(self.rate_hz, self._tick)
+        return super().on_activate(state)
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Disarm: ramp the pressure down at the slew limit, then stop the loop."""
+        self._ramp_down_and_stop("deactivated")
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Release the model and the subscriptions."""
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Ramp down if armed, then release."""
+        self._ramp_down_and_stop("shutting down")
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """A transition raised: ramp down if armed and release, so nothing holds pressure."""
+        self._ramp_down_and_stop("error")
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def close(self) -> None:
+        """Process exit (SIGINT, SIGTERM): ramp down if still armed (idempotent)."""
+        self._ramp_down_and_stop("process exiting")
+
+    def _ramp_down_and_stop(self, why: str) -> None:
+        loop = self.active_loop
+        if loop is None:
+            return
+        with self._lock:
+            self._drop_pending(why)
+            core = self.core
+            if core is not None:
+                core.stop()
+        if core is not None and core.state != ControlCore.IDLE:
+            self.get_logger().info(f"{why}: ramping the pressure down before the loop stops")
+            # The loop thread does the ramp at the slew limit; bounded in case it has died.
+            give_up_s = time.monotonic() + self.pmax_pa / self.slew_pa_per_s + 2.0
+            while (
+                core.state != ControlCore.IDLE and loop.running and time.monotonic() < give_up_s
+            ):
+                time.sleep(loop.period_s)
+            if core.state != ControlCore.IDLE:
+                self.get_logger().error(
+                    f"{why}: ramp-down did not finish (loop running: {loop.running}); the "
+                    "valve driver's watchdog vents when commands stop"
+                )
+        self.stop_loop()
+
+    def _release(self) -> None:
+        self.stop_loop()
+        if self._trajectory_sub is not None:
+            self.destroy_subscription(self._trajectory_sub)
+            self._trajectory_sub = None
+        if self._action is not None:
+            self._action.destroy()
+            self._action = None
+        for polled in (self._sensors, self._angles):
+            if polled is not None:
+                polled.destroy()
+        self._sensors = self._angles = None
+        with self._lock:
+            self.core = None
 
     def _refuse(self, reason: str) -> None:
         with self._lock:
@@ -216,24 +328,39 @@ class CompensatorNode(LoopNode):
         self.get_logger().error(f"trajectory refused: {reason}")
         self._publish_diagnostics()
 
-    def _on_trajectory(self, msg: JointTrajectory) -> None:
+    def plan_trajectory(self, msg: JointTrajectory) -> TrajectoryPlan | str:
+        """The plan ``msg`` asks for, or why it is refused (nothing is queued or counted).
+
+        Checks the whole trajectory against the limits, and that the node is armed (active).
+        """
+        if self.active_loop is None or self.core is None:
+            return "the compensator is not active (lifecycle: configure, then activate it)"
         names = list(msg.joint_names)
         if BEND_JOINT not in names:
-            self._refuse(f"joint_names {names!r} lack {BEND_JOINT!r}")
-            return
+            return f"joint_names {names!r} lack {BEND_JOINT!r}"
         j = names.index(BEND_JOINT)
         times, angles = [], []
         for i, point in enumerate(msg.points):
             if len(point.positions) <= j:
-                self._refuse(f"point {i} has no position for {BEND_JOINT!r}")
-                return
+                return f"point {i} has no position for {BEND_JOINT!r}"
             times.append(point.time_from_start.sec + point.time_from_start.nanosec * 1e-9)
             angles.append(point.positions[j])
         try:
-            plan = TrajectoryPlan.from_knots(times, angles, self.limits, self.rate_hz)
+            return TrajectoryPlan.from_knots(times, angles, self.limits, self.rate_hz)
         except CatheterError as exc:
-            self._refuse(str(exc))
-            return
+            return str(exc)
+
+    def submit_trajectory(self, msg: JointTrajectory) -> str | None:
+        """Accept ``msg`` for the control thread to run, or refuse it: the reason, or None.
+
+        What the ``trajectory`` topic does with every message; any other front end (an
+        action server) calls this too, so the acceptance rules live in one place. A refusal
+        is counted, logged and put on ``/diagnostics``.
+        """
+        plan = self.plan_trajectory(msg)
+        if isinstance(plan, str):
+            self._refuse(plan)
+            return plan
         with self._lock:
             # Start on the control thread once a valve driver listens: commands sent before
             # DDS has matched it would go nowhere while the plan's clock runs on.
@@ -242,17 +369,52 @@ class CompensatorNode(LoopNode):
         self.get_logger().info(
             f"accepted a {plan.duration_s:.2f} s trajectory ({len(msg.points)} points)"
         )
+        return None
+
+    def _on_trajectory(self, msg: JointTrajectory) -> None:
+        self.submit_trajectory(msg)
+
+    def stop_trajectory(self) -> None:
+        """Drop a pending plan and ramp the pressure down at the slew limit (``~/stop``)."""
+        with self._lock:
+            self._drop_pending("stopped before it started")
+            if self.core is not None:
+                self.core.stop()
+
+    def _drop_pending(self, why: str) -> None:
+        """Forget the pending plan, remembering why (the caller holds the lock)."""
+        if self._pending is not None:
+            self._dropped = (self._pending[0], why)
+            self._pending = None
+
+    def trajectory_progress(self) -> RunProgress:
+        """What became of the accepted plans, for the trajectory action."""
+        now_s = time.monotonic()
+        with self._lock:
+            core = self.core
+            following = (
+                core.plan if core is not None and core.state == ControlCore.FOLLOWING else None
+            )
+            return RunProgress(
+                pending=None if self._pending is None else self._pending[0],
+                following=following,
+                elapsed_s=0.0 if following is None or core is None else core.elapsed_s(now_s),
+                ended=tuple(e for e in (self._dropped, core and core.ended) if e),
+                idle=self._pending is None and (core is None or core.state == ControlCore.IDLE),
+            )
 
     def _on_stop(self, _req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
-        with self._lock:
-            self.core.stop()
+        self.stop_trajectory()
         resp.success = True
         resp.message = "ramping pressure down"
         return resp
 
     def _tick(self, _k: int, deadline_s: float) -> None:
+        core, loop, sensors = self.core, self.active_loop, self._sensors
+        if core is None or loop is None or sensors is None:
+            return
         refusal = fault = ""
-        for name in self._sensors.poll():
+        for name in sensors.poll():
             self.watch.seen(name, deadline_s)
         if self._angles is not None:
             samples = self._angles.take(TIP_ANGLE.name)
@@ -269,19 +431,19 @@ class CompensatorNode(LoopNode):
                 plan, give_up_s = self._pending
                 listening = self._pub_cmd.get_subscription_count() > 0
                 if listening and not stale:
-                    self.core.start(plan, deadline_s)
+                    core.start(plan, deadline_s)
                     self._pending = None
                     self._refusal_standing = False
                 elif deadline_s > give_up_s:
-                    self._pending = None
                     refusal = stale or (
                         f"no valve driver subscribes to "
                         f"{self._pub_cmd.topic_name} after {self.driver_wait_s:g} s"
                     )
-            if stale and self.core.state != ControlCore.IDLE and not self.core.fault_reason:
-                self.core.fault(stale)
+                    self._drop_pending(refusal)
+            if stale and core.state != ControlCore.IDLE and not core.fault_reason:
+                core.fault(stale)
                 fault = stale
-            out = self.core.tick(deadline_s, self.loop.period_s, self._angle_measured_rad)
+            out = core.tick(deadline_s, loop.period_s, self._angle_measured_rad)
         if refusal:
             self._refuse(refusal)
         if fault:
@@ -296,14 +458,20 @@ class CompensatorNode(LoopNode):
         self._pub_des.publish(messages.joint_state(out.angle_desired_rad, stamp_ns))
 
     def _publish_diagnostics(self) -> None:
-        stats = self.loop.stats()
+        loop = self.active_loop
         with self._lock:
             refusals, last, accepted = self._refusals, self._last_refusal, self._accepted
             standing = self._refusal_standing
-            state, bad_model = self.core.state, self.core.nonfinite_from_compensator
-            model_error, fault = self.core.compensator_error, self.core.fault_reason
-            model_steps = self.core.model_steps
-            fb = self.core.feedback
+            core = self.core
+        if core is None or loop is None:
+            self._publish_not_armed(core is not None, refusals, last)
+            return
+        stats = loop.stats()
+        with self._lock:
+            state, bad_model = core.state, core.nonfinite_from_compensator
+            model_error, fault = core.compensator_error, core.fault_reason
+            model_steps = core.model_steps
+            fb = core.feedback
             fb_values = (
                 {}
                 if fb is None
@@ -315,8 +483,8 @@ class CompensatorNode(LoopNode):
             )
         now_s = time.monotonic()
         level, message = diagnostics.OK, state
-        if self.loop.error is not None:
-            level, message = diagnostics.ERROR, f"control loop died: {self.loop.error!r}"
+        if loop.error is not None:
+            level, message = diagnostics.ERROR, f"control loop died: {loop.error!r}"
         elif fault:
             level, message = diagnostics.ERROR, f"stopped: {fault}; ramped down"
         elif bad_model:
@@ -344,12 +512,12 @@ class CompensatorNode(LoopNode):
                 "trajectories_accepted": accepted,
                 "trajectories_refused": refusals,
                 "last_refusal": last,
-                "realtime": self.realtime,
+                "realtime": loop.realtime,
                 "ticks": stats.ticks,
                 "missed_deadlines": stats.missed,
                 "lateness_p50_ms": f"{stats.lateness_p50_s * 1e3:.3f}",
                 "lateness_p99_ms": f"{stats.lateness_p99_s * 1e3:.3f}",
-                "behind_max_ms": f"{self.loop.take_worst_behind_s() * 1e3:.3f}",
+                "behind_max_ms": f"{loop.take_worst_behind_s() * 1e3:.3f}",
                 "compute_p50_ms": f"{stats.compute_p50_s * 1e3:.3f}",
                 "compute_p99_ms": f"{stats.compute_p99_s * 1e3:.3f}",
                 **{
@@ -365,8 +533,30 @@ class CompensatorNode(LoopNode):
             },
         )
 
+    def _publish_not_armed(self, configured: bool, refusals: int, last: str) -> None:
+        """Not active: say which lifecycle state, and why configure failed if it did."""
+        if configured:
+            level, message = diagnostics.WARN, "configured, not active: trajectories refused"
+        elif self.transition_failure:
+            level, message = diagnostics.ERROR, self.transition_failure
+        else:
+            level, message = diagnostics.WARN, "not configured: trajectories refused"
+        diagnostics.publish_status(
+            self._pub_diag,
+            self,
+            level=level,
+            message=message,
+            values={
+                "state": "inactive" if configured else "unconfigured",
+                "compensator": self.kind,
+                "trajectories_refused": refusals,
+                "last_refusal": last,
+            },
+        )
+
     def destroy_node(self) -> None:
         """Stop the loop (which polls the sensors) before their helper node goes."""
+        self.stop_loop()
         super().destroy_node()
         for name in ("_sensors", "_angles"):
             polled = getattr(self, name, None)

@@ -10,7 +10,7 @@ from rclpy.qos import (
     qos_profile_sensor_data,
 )
 
-from catheter_driver import qos as _driver_qos
+import catheter_driver.qos as _driver_qos
 
 SENSOR = qos_profile_sensor_data
 """What a controller asks of a stream: best effort, the newest few samples."""
@@ -28,3 +28,4 @@ TRAJECTORY = QoSProfile(
 STREAM = _driver_qos.STREAM
 KEEP_EVERY_SAMPLE = _driver_qos.KEEP_EVERY_SAMPLE
 RECORD = _driver_qos.RECORD
+overridable_publisher = _driver_qos.overridable_publisher

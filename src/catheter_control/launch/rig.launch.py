@@ -7,24 +7,61 @@
 The drivers read their device settings from the parameter files installed with
 catheter_driver (``share/catheter_driver/config``, one per backend; docs/rig.md). Those files
 are keyed by node name with the ``/catheter`` namespace (``/catheter/valve_driver:``): with
-another ``namespace``, pass files keyed for it, or the drivers start with their defaults and
-no device. Both drivers are lifecycle nodes that configure and activate themselves
-(``autostart``). Zero the laser before the first run (docs/rig.md).
+another ``namespace``, pass files keyed for it, or the drivers have no device and fail
+configure, by name. The drivers and the compensator are lifecycle nodes: this file configures
+each, and activates it once it is inactive (the standard launch_ros pattern); a driver whose
+device does not answer stays unconfigured (its reason on /diagnostics), and
+``ros2 lifecycle set /catheter/valve_driver configure`` retries. Zero the laser before the
+first run (docs/rig.md).
 
-On Ctrl-C, launch signals every node at once; the valve driver vents on shutdown and by its
-watchdog whatever the order.
+On Ctrl-C, launch signals every node at once; the compensator ramps down if the valve driver
+outlives it, and the valve driver vents on shutdown and by its watchdog whatever the order.
 """
 
 import time
 from pathlib import Path
 
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument
+from launch.actions import DeclareLaunchArgument, EmitEvent, RegisterEventHandler
 from launch.conditions import IfCondition
+from launch.events import matches_action
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
-from launch_ros.actions import Node
+from launch_ros.actions import LifecycleNode, Node
+from launch_ros.event_handlers import OnStateTransition
+from launch_ros.events.lifecycle import ChangeState
 from launch_ros.parameter_descriptions import ParameterValue
 from launch_ros.substitutions import FindPackageShare
+from lifecycle_msgs.msg import Transition
+
+
+def configure_then_activate(node: LifecycleNode) -> list:
+    """Configure ``node`` at launch, and activate it when it reaches inactive from configuring.
+
+    ``start_state`` matters: a later deactivate (active -> inactive) must not re-activate it.
+    """
+    return [
+        RegisterEventHandler(
+            OnStateTransition(
+                target_lifecycle_node=node,
+                start_state="configuring",
+                goal_state="inactive",
+                entities=[
+                    EmitEvent(
+                        event=ChangeState(
+                            lifecycle_node_matcher=matches_action(node),
+                            transition_id=Transition.TRANSITION_ACTIVATE,
+                        )
+                    )
+                ],
+            )
+        ),
+        EmitEvent(
+            event=ChangeState(
+                lifecycle_node_matcher=matches_action(node),
+                transition_id=Transition.TRANSITION_CONFIGURE,
+            )
+        ),
+    ]
 
 
 def generate_launch_description() -> LaunchDescription:
@@ -111,6 +148,7 @@ def generate_launch_description() -> LaunchDescription:
     recorder = Node(
         package="catheter_control",
         executable="recorder",
+        name="recorder",
         namespace=namespace,
         condition=IfCondition(LaunchConfiguration("record")),
         parameters=[
@@ -132,23 +170,26 @@ def generate_launch_description() -> LaunchDescription:
         ],
         output="screen",
     )
-    valve_driver = Node(
+    valve_driver = LifecycleNode(
         package="catheter_driver",
         executable="valve_driver",
+        name="valve_driver",
         namespace=namespace,
         parameters=[LaunchConfiguration("valve_config"), {"rt_priority": rt_priority}],
         output="screen",
     )
-    laser_angle = Node(
+    laser_angle = LifecycleNode(
         package="catheter_driver",
         executable="laser_angle",
+        name="laser_angle",
         namespace=namespace,
         parameters=[LaunchConfiguration("laser_config"), {"rt_priority": rt_priority}],
         output="screen",
     )
-    compensator = Node(
+    compensator = LifecycleNode(
         package="catheter_control",
         executable="compensator",
+        name="compensator",
         namespace=namespace,
         parameters=[
             {
@@ -172,4 +213,15 @@ def generate_launch_description() -> LaunchDescription:
         ],
         output="screen",
     )
-    return LaunchDescription([*arguments, recorder, valve_driver, laser_angle, compensator])
+    return LaunchDescription(
+        [
+            *arguments,
+            recorder,
+            valve_driver,
+            laser_angle,
+            compensator,
+            *configure_then_activate(valve_driver),
+            *configure_then_activate(laser_angle),
+            *configure_then_activate(compensator),
+        ]
+    )

@@ -10,20 +10,59 @@ Then, from another shell on the same ROS_DOMAIN_ID, send a trajectory to the run
     ros2 run catheter_control follow_trajectory --preset traj_up_chirp
 
 The same graph as ``bringup --bag PATH`` (catheter_control/bringup.py), which needs no launch
-package. One difference: on Ctrl-C, launch signals every node at once, where ``bringup`` stops
-the compensator first and the recorder last. The safety does not depend on it (the simulated
-driver vents by its own watchdog), but the bag may miss the last vent.
+package; tests/catheter_control/test_launch_files.py checks that both start the same nodes
+with the same parameters. ``sim_hardware`` and ``compensator`` are lifecycle nodes: this file
+configures each, and activates it once it is inactive (the standard launch_ros pattern).
+
+One difference from ``bringup``: on Ctrl-C, launch signals every node at once, where
+``bringup`` deactivates the compensator first (a ramp-down) and stops the recorder last. The
+compensator still ramps down on SIGINT if the rig outlives it, and the safety does not depend
+on it (the simulated driver vents by its own watchdog), but the bag may miss the last vent.
 """
 
 import time
 from pathlib import Path
 
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument
+from launch.actions import DeclareLaunchArgument, EmitEvent, RegisterEventHandler
 from launch.conditions import IfCondition
+from launch.events import matches_action
 from launch.substitutions import LaunchConfiguration
-from launch_ros.actions import Node
+from launch_ros.actions import LifecycleNode, Node
+from launch_ros.event_handlers import OnStateTransition
+from launch_ros.events.lifecycle import ChangeState
 from launch_ros.parameter_descriptions import ParameterValue
+from lifecycle_msgs.msg import Transition
+
+
+def configure_then_activate(node: LifecycleNode) -> list:
+    """Configure ``node`` at launch, and activate it when it reaches inactive from configuring.
+
+    ``start_state`` matters: a later deactivate (active -> inactive) must not re-activate it.
+    """
+    return [
+        RegisterEventHandler(
+            OnStateTransition(
+                target_lifecycle_node=node,
+                start_state="configuring",
+                goal_state="inactive",
+                entities=[
+                    EmitEvent(
+                        event=ChangeState(
+                            lifecycle_node_matcher=matches_action(node),
+                            transition_id=Transition.TRANSITION_ACTIVATE,
+                        )
+                    )
+                ],
+            )
+        ),
+        EmitEvent(
+            event=ChangeState(
+                lifecycle_node_matcher=matches_action(node),
+                transition_id=Transition.TRANSITION_CONFIGURE,
+            )
+        ),
+    ]
 
 
 def generate_launch_description() -> LaunchDescription:
@@ -94,6 +133,7 @@ def generate_launch_description() -> LaunchDescription:
     recorder = Node(
         package="catheter_control",
         executable="recorder",
+        name="recorder",
         namespace=namespace,
         condition=IfCondition(LaunchConfiguration("record")),
         parameters=[
@@ -115,16 +155,18 @@ def generate_launch_description() -> LaunchDescription:
         ],
         output="screen",
     )
-    sim_hardware = Node(
+    sim_hardware = LifecycleNode(
         package="catheter_driver",
         executable="sim_hardware",
+        name="sim_hardware",
         namespace=namespace,
         parameters=[{"rt_priority": rt_priority}],
         output="screen",
     )
-    compensator = Node(
+    compensator = LifecycleNode(
         package="catheter_control",
         executable="compensator",
+        name="compensator",
         namespace=namespace,
         parameters=[
             {
@@ -148,4 +190,13 @@ def generate_launch_description() -> LaunchDescription:
         ],
         output="screen",
     )
-    return LaunchDescription([*arguments, recorder, sim_hardware, compensator])
+    return LaunchDescription(
+        [
+            *arguments,
+            recorder,
+            sim_hardware,
+            compensator,
+            *configure_then_activate(sim_hardware),
+            *configure_then_activate(compensator),
+        ]
+    )

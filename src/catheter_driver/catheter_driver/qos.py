@@ -69,7 +69,9 @@ def _valid_depth(profile: QoSProfile) -> Any:
     return result
 
 
-def overridable_publisher(node: Node, msg_type: Any, topic: str, profile: QoSProfile) -> Publisher:
+def overridable_publisher(
+    node: Node, msg_type: Any, topic: str, profile: QoSProfile
+) -> Publisher[Any]:
     """A publisher whose history, depth and reliability REP 2003 parameters may override.
 
     ``-p qos_overrides./catheter/pressure/measured.publisher.depth:=1000`` (the topic's full
