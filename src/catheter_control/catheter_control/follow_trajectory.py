@@ -153,7 +153,15 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
         "(0: normal scheduling; default: the nodes' own, 50)",
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    return parser.parse_args(argv)
+    # ROS arguments (after --ros-args) are rclpy's: -r __ns:=/x sets the namespace, and all
+    # of them go to this tool's own node.
+    from catheter_control.bringup import namespace_from_ros_args, split_ros_args
+
+    own, ros_args = split_ros_args(sys.argv[1:] if argv is None else argv)
+    args = parser.parse_args(own)
+    args.namespace = namespace_from_ros_args(ros_args, args.namespace)
+    args.ros_args = ros_args
+    return args
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -242,7 +250,11 @@ def main(argv: list[str] | None = None) -> int:
         graph = ProcessGraph(specs, args.namespace, log_dir=run_dir / "logs")
         what = "simulated rig" if args.sim else "emulated devices and the real drivers"
         print(f"follow_trajectory: starting the {what} (logs in {run_dir / 'logs'})")
-        graph.start()
+        try:
+            graph.start()
+        except CatheterError as exc:  # a node failed configure/activate, or exited
+            print(f"follow_trajectory: {exc}", file=sys.stderr)
+            return EXIT_GRAPH
     try:
         return _run(args, plan, run_dir, bag_path, graph, lead_s=lead_s)
     finally:
@@ -292,7 +304,9 @@ def _run(
     )
 
     data = _Collected()
-    with rclpy.init(args=["follow_trajectory", "--ros-args", "-r", f"__ns:={args.namespace}"]):
+    with rclpy.init(
+        args=["follow_trajectory", "--ros-args", "-r", f"__ns:={args.namespace}", *args.ros_args]
+    ):
         node = Node("follow_trajectory")
 
         def on_desired(msg: JointState) -> None:
