@@ -14,7 +14,6 @@ from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
-from scipy.optimize import isotonic_regression
 
 from catheter_models.errors import ParameterError
 from catheter_models.model_dir import read_model_dir, write_model_dir
@@ -22,6 +21,44 @@ from catheter_models.model_dir import read_model_dir, write_model_dir
 KIND = "static_map"
 PARAMS_FILE = "static_map.json"
 FloatArray = npt.NDArray[np.float64]
+
+
+def isotonic_increasing(values: FloatArray, weights: FloatArray) -> FloatArray:
+    """Weighted least-squares projection of ``values`` onto non-decreasing sequences.
+
+    Pool adjacent violators, exact in one pass. Ours rather than SciPy's
+    ``optimize.isotonic_regression``, which needs SciPy >= 1.12: Ubuntu 24.04 (the container
+    image) ships 1.11, and one implementation keeps the fitted map identical on both.
+
+    Raises:
+        ParameterError: Shapes differ, or a weight is not positive and finite.
+    """
+    values = np.asarray(values, dtype=np.float64)
+    weights = np.asarray(weights, dtype=np.float64)
+    if values.ndim != 1 or values.shape != weights.shape:
+        raise ParameterError(
+            f"isotonic fit: values and weights must be 1-D of equal length, "
+            f"{values.shape} vs {weights.shape}"
+        )
+    if not (np.isfinite(weights).all() and (weights > 0).all()):
+        raise ParameterError("isotonic fit: every weight must be positive and finite")
+    levels: list[float] = []
+    level_weights: list[float] = []
+    counts: list[int] = []
+    for value, weight in zip(values.tolist(), weights.tolist(), strict=True):
+        levels.append(value)
+        level_weights.append(weight)
+        counts.append(1)
+        # Merge backwards while the newest block sits below its predecessor.
+        while len(levels) > 1 and levels[-2] > levels[-1]:
+            merged_weight = level_weights[-2] + level_weights[-1]
+            levels[-2] = (levels[-2] * level_weights[-2] + levels[-1] * level_weights[-1]) / (
+                merged_weight
+            )
+            level_weights[-2] = merged_weight
+            counts[-2] += counts[-1]
+            del levels[-1], level_weights[-1], counts[-1]
+    return np.repeat(np.array(levels, dtype=np.float64), counts)
 
 
 @dataclass(frozen=True)
@@ -81,7 +118,7 @@ class StaticMap:
             )
         knots = np.array(knots_p)
         # Bend never falls as pressure rises on the central curve: project onto monotone.
-        angles = isotonic_regression(np.array(knots_a), weights=np.array(weights)).x
+        angles = isotonic_increasing(np.array(knots_a), np.array(weights))
         return cls(pressure_pa=knots, angle_rad=angles)
 
     def angle(self, pressure_pa: npt.ArrayLike) -> FloatArray:

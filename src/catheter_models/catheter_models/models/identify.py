@@ -322,7 +322,9 @@ def identify(
             maxiter=budget.max_generations,
             popsize=budget.popsize,
             tol=budget.tol,
-            rng=np.random.default_rng(seed),
+            # seed=, not rng= (SciPy >= 1.15): Ubuntu 24.04 ships SciPy 1.11. Both take the
+            # Generator as is and draw the same numbers.
+            seed=np.random.default_rng(seed),
             callback=callback,
             polish=False,
             init="latinhypercube",
