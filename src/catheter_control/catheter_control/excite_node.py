@@ -104,7 +104,10 @@ class ExciteNode(LoopNode):
         self.spec_names = [spec.name for spec in specs]
         self.signal_name = name
         self.done = threading.Event()
-        self._pub = self.create_publisher(FluidPressure, PRESSURE_COMMAND.name, qos.STREAM)
+        # The command stream: QoS overridable by parameter (REP 2003), as the compensator's.
+        self._pub = qos.overridable_publisher(
+            self, FluidPressure, PRESSURE_COMMAND.name, qos.STREAM
+        )
         self._pub_diag = diagnostics.create_diagnostics_publisher(self)
         self._first_k: int | None = None
         self._wait_until_s = 0.0
