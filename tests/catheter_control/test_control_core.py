@@ -109,6 +109,20 @@ def test_preemption_keeps_compensator_memory_but_fresh_start_resets() -> None:
     assert comp.resets == 2
 
 
+def test_ended_says_which_plan_stopped_and_why_but_not_a_preempted_one() -> None:
+    core = ControlCore(LinearCompensator(), 0.0, 3e5, max_slew_pa_per_s=1e7)
+    first, second, third = ramp_plan(), ramp_plan(10.0), ramp_plan(5.0)
+    core.start(first, 0.0)
+    run(core, 0.0, 10)
+    core.start(second, 10 * DT)  # pre-empts the first: it did not end, it was replaced
+    assert core.ended is None
+    run(core, 10 * DT, int(2.0 * RATE_HZ) + 50)
+    assert core.ended == (second, "")  # ran to its end
+    core.start(third, 10.0)
+    core.fault("tip/angle stale")
+    assert core.ended == (third, "tip/angle stale")
+
+
 def test_static_inverse_compensator_inverts_the_curve() -> None:
     m = StaticMap(np.array([0.0, 1e5, 2e5, 3e5]), np.radians([0.0, 0.0, 10.0, 25.0]))
     comp = StaticInverseCompensator(m)

@@ -128,6 +128,13 @@ class ControlCore:
         """Why the last run was cut short by :meth:`fault` ('' if it was not)."""
         self.model_steps = 0
         """Compensator steps taken (one per model sample, not per tick)."""
+        self.ended: tuple[TrajectoryPlan, str] | None = None
+        """The newest plan that stopped being followed, and why: '' when it ran to its end,
+        else the reason it was cut short. A plan pre-empted by :meth:`start` does not end."""
+
+    def _end(self, why: str) -> None:
+        if self.state == self.FOLLOWING and self.plan is not None:
+            self.ended = (self.plan, why)
 
     def start(self, plan: TrajectoryPlan, now_s: float) -> None:
         """Follow ``plan`` from ``now_s``; pre-empts any plan in progress.
@@ -155,11 +162,13 @@ class ControlCore:
 
     def stop(self) -> None:
         """Ramp down to zero pressure at the slew limit, then idle."""
+        self._end("stopped on request; pressure ramped down")
         if self.state != self.IDLE:
             self.state = self.RAMPING_DOWN
 
     def fault(self, reason: str) -> None:
         """Ramp down because something the run depends on failed (a stale sensor)."""
+        self._end(reason)
         if self.state != self.IDLE:
             self.fault_reason = reason
             self.state = self.RAMPING_DOWN
@@ -208,6 +217,7 @@ class ControlCore:
         if self.state == self.FOLLOWING and self.plan is not None:
             elapsed = now_s - self._start_s
             if elapsed > self.plan.duration_s:
+                self._end("")
                 self.state = self.RAMPING_DOWN
             else:
                 self._last_angle = self.plan.desired_at(elapsed)
@@ -221,6 +231,9 @@ class ControlCore:
                 if not math.isfinite(target):
                     # A broken model must not move the catheter: ramp down and say why.
                     self.nonfinite_from_compensator += 1
+                    self._end(
+                        f"compensator failed ({self.compensator_error or 'non-finite pressure'})"
+                    )
                     self.state = self.RAMPING_DOWN
                 else:
                     self._last_target_pa = target

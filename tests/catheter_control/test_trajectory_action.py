@@ -1,0 +1,270 @@
+"""The FollowJointTrajectory server over a fake compensator, client and server in one process.
+
+The fake stands for the compensator's narrow interface (submit, progress, stop) with a plan
+clock the test moves by hand, so each outcome a client relies on is reached on purpose:
+success, a refusal with the compensator's reason, a path-tolerance abort that stops the
+catheter, a cancel that ends only once the pressure is down, and pre-emption.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import pytest
+import rclpy
+from builtin_interfaces.msg import Duration
+from control_msgs.action import FollowJointTrajectory
+from control_msgs.msg import JointTolerance
+from rclpy.action.client import ActionClient
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data
+from rclpy.task import Future
+from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from catheter_control.trajectory import TrajectoryLimits, TrajectoryPlan
+from catheter_control.trajectory_action import RunProgress, TrajectoryActionServer
+from catheter_driver import messages
+from catheter_models.contract import BEND_JOINT, TIP_ANGLE
+from catheter_models.errors import CatheterError
+
+pytestmark = pytest.mark.filterwarnings("ignore:module 'sre_:DeprecationWarning")
+
+Result = FollowJointTrajectory.Result
+TIMEOUT_S = 20.0  # generous: the machine may be busy; every wait ends as soon as it can
+
+
+class FakeRunner:
+    """The compensator as the server sees it; the test moves plan time and ends plans."""
+
+    def __init__(self) -> None:
+        self.pending: TrajectoryPlan | None = None
+        self.following: TrajectoryPlan | None = None
+        self.elapsed_s = 0.0
+        self.ended: list[tuple[TrajectoryPlan, str]] = []
+        self.pressure_down = True
+        self.stops = 0
+
+    def submit_trajectory(self, msg: JointTrajectory) -> str | None:
+        if BEND_JOINT not in msg.joint_names:
+            return f"joint_names {list(msg.joint_names)!r} lack {BEND_JOINT!r}"
+        times = [p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 for p in msg.points]
+        try:
+            self.pending = TrajectoryPlan.from_knots(
+                times, [p.positions[0] for p in msg.points], TrajectoryLimits(), 250.0
+            )
+        except CatheterError as exc:
+            return str(exc)
+        return None
+
+    def trajectory_progress(self) -> RunProgress:
+        return RunProgress(
+            pending=self.pending,
+            following=self.following,
+            elapsed_s=self.elapsed_s,
+            ended=tuple(self.ended),
+            idle=self.pending is None and self.following is None and self.pressure_down,
+        )
+
+    def stop_trajectory(self) -> None:
+        self.stops += 1
+        if self.pending is not None:
+            self.ended.append((self.pending, "stopped before it started"))
+            self.pending = None
+        if self.following is not None:
+            self.ended.append((self.following, "stopped on request; pressure ramped down"))
+            self.following = None
+            self.pressure_down = False  # the ramp takes a while
+
+    # what the control thread does
+    def start(self) -> TrajectoryPlan:
+        assert self.pending is not None
+        self.following, self.pending, self.elapsed_s = self.pending, None, 0.0
+        self.pressure_down = False
+        return self.following
+
+    def run_to_end(self) -> None:
+        assert self.following is not None
+        self.elapsed_s = self.following.duration_s
+        self.ended.append((self.following, ""))
+        self.following = None
+
+
+@dataclass
+class Rig:
+    runner: FakeRunner
+    node: Node
+    client: ActionClient
+    executor: SingleThreadedExecutor
+    publish_tip: Callable[[float], None]
+
+    def spin_until(self, done: Callable[[], bool]) -> None:
+        deadline = self.node.get_clock().now().nanoseconds + int(TIMEOUT_S * 1e9)
+        while not done():
+            assert self.node.get_clock().now().nanoseconds < deadline, "timed out"
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def send(self, goal: FollowJointTrajectory.Goal, feedback: list[Any] | None = None) -> Any:
+        """Send ``goal`` and return its accepted handle."""
+        future = self.client.send_goal_async(
+            goal, feedback_callback=None if feedback is None else feedback.append
+        )
+        self.spin_until(future.done)
+        handle = future.result()
+        assert handle is not None and handle.accepted
+        return handle
+
+    def result(self, handle: Any) -> Any:
+        future: Future[Any] = handle.get_result_async()
+        self.spin_until(future.done)
+        return future.result()
+
+
+@pytest.fixture
+def rig() -> Iterator[Rig]:
+    context = Context()
+    # A domain of its own (per process), discovery on this host only.
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    rclpy.init(context=context, domain_id=100 + os.getpid() % 100)
+    node = Node("trajectory_action_test", context=context)
+    runner = FakeRunner()
+    server = TrajectoryActionServer(node, runner, feedback_rate_hz=50.0)
+    client = ActionClient(node, FollowJointTrajectory, "follow_joint_trajectory")
+    tip_pub = node.create_publisher(JointState, TIP_ANGLE.name, qos_profile_sensor_data)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    rig = Rig(
+        runner,
+        node,
+        client,
+        executor,
+        lambda angle_rad: tip_pub.publish(messages.joint_state(angle_rad, 0)),
+    )
+    try:
+        rig.spin_until(lambda: client.server_is_ready())
+        yield rig
+    finally:
+        server.destroy()
+        client.destroy()
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+
+
+def goal_of(points_deg: list[tuple[float, float]], joint: str = BEND_JOINT) -> Any:
+    goal = FollowJointTrajectory.Goal()
+    goal.trajectory.joint_names = [joint]
+    for t_s, angle_deg in points_deg:
+        goal.trajectory.points.append(
+            JointTrajectoryPoint(
+                positions=[math.radians(angle_deg)],
+                time_from_start=Duration(sec=int(t_s), nanosec=round((t_s % 1.0) * 1e9)),
+            )
+        )
+    return goal
+
+
+RAMP = [(1.0, 10.0), (2.0, 0.0)]
+
+
+def test_a_goal_that_runs_to_its_end_succeeds_with_feedback(rig: Rig) -> None:
+    feedback: list[Any] = []
+    handle = rig.send(goal_of(RAMP), feedback)
+    rig.spin_until(lambda: rig.runner.pending is not None)
+    rig.runner.start()
+    rig.runner.elapsed_s = 1.0  # at the peak: desired 10 deg
+    rig.publish_tip(math.radians(9.0))
+    rig.spin_until(lambda: any(f.feedback.actual.positions for f in feedback))
+    fb = next(f.feedback for f in feedback if f.feedback.actual.positions)
+    assert list(fb.joint_names) == [BEND_JOINT]
+    assert fb.desired.positions[0] == pytest.approx(math.radians(10.0))
+    assert fb.actual.positions[0] == pytest.approx(math.radians(9.0))
+    assert fb.error.positions[0] == pytest.approx(math.radians(1.0))
+    assert fb.index == 0  # the goal's first point (t = 1 s) is in force
+    rig.runner.run_to_end()
+    response = rig.result(handle)
+    assert response.status == 4  # GoalStatus.STATUS_SUCCEEDED
+    assert response.result.error_code == Result.SUCCESSFUL
+
+
+@pytest.mark.parametrize(
+    ("goal", "code", "reason"),
+    [
+        (goal_of(RAMP, joint="elbow"), Result.INVALID_JOINTS, "'elbow'"),
+        (goal_of([(1.0, 80.0), (2.0, 0.0)]), Result.INVALID_GOAL, "outside the allowed"),
+    ],
+    ids=["wrong joint", "beyond the angle limit"],
+)
+def test_a_refused_goal_ends_with_the_reason_and_nothing_runs(
+    rig: Rig, goal: Any, code: int, reason: str
+) -> None:
+    response = rig.result(rig.send(goal))
+    assert response.status == 6  # GoalStatus.STATUS_ABORTED
+    assert response.result.error_code == code
+    assert reason in response.result.error_string
+    assert rig.runner.pending is None
+
+
+def test_a_velocity_tolerance_is_refused_not_ignored(rig: Rig) -> None:
+    goal = goal_of(RAMP)
+    goal.path_tolerance = [JointTolerance(name=BEND_JOINT, position=0.0, velocity=0.1)]
+    response = rig.result(rig.send(goal))
+    assert response.result.error_code == Result.INVALID_GOAL
+    assert "velocity" in response.result.error_string
+    assert rig.runner.pending is None
+
+
+def test_leaving_the_path_tolerance_stops_the_catheter(rig: Rig) -> None:
+    goal = goal_of(RAMP)
+    goal.path_tolerance = [JointTolerance(name=BEND_JOINT, position=math.radians(2.0))]
+    rig.publish_tip(0.0)
+    rig.spin_until(lambda: rig.node.count_subscribers(TIP_ANGLE.name) > 0)
+    # The goal needs a fresh tip angle to be accepted: keep one coming until it is.
+    handle_future = rig.client.send_goal_async(goal)
+    rig.spin_until(lambda: (rig.publish_tip(0.0), handle_future.done())[1])
+    handle = handle_future.result()
+    assert handle is not None
+    rig.spin_until(lambda: rig.runner.pending is not None)
+    rig.runner.start()
+    rig.runner.elapsed_s = 1.0  # desired 10 deg; measured 5 deg is 5 deg off
+    result_future = handle.get_result_async()
+    rig.spin_until(lambda: (rig.publish_tip(math.radians(5.0)), result_future.done())[1])
+    result = result_future.result().result
+    assert result.error_code == Result.PATH_TOLERANCE_VIOLATED
+    assert "off the path by +5.00 deg" in result.error_string
+    assert rig.runner.stops == 1
+
+
+def test_cancel_ends_only_once_the_pressure_is_down(rig: Rig) -> None:
+    handle = rig.send(goal_of(RAMP))
+    rig.spin_until(lambda: rig.runner.pending is not None)
+    rig.runner.start()
+    cancel = handle.cancel_goal_async()
+    rig.spin_until(cancel.done)
+    assert rig.runner.stops == 1
+    result_future = handle.get_result_async()
+    rig.executor.spin_once(timeout_sec=0.2)
+    assert not result_future.done(), "canceled while the pressure was still ramping down"
+    rig.runner.pressure_down = True
+    rig.spin_until(result_future.done)
+    assert result_future.result().status == 5  # GoalStatus.STATUS_CANCELED
+
+
+def test_a_new_goal_preempts_the_running_one(rig: Rig) -> None:
+    first = rig.send(goal_of(RAMP))
+    rig.spin_until(lambda: rig.runner.pending is not None)
+    rig.runner.start()
+    second = rig.send(goal_of([(1.0, 5.0), (2.0, 0.0)]))
+    rig.spin_until(lambda: rig.runner.pending is not None)
+    rig.runner.start()
+    first_result = rig.result(first)
+    assert first_result.status == 6
+    assert "pre-empted" in first_result.result.error_string
+    rig.runner.run_to_end()
+    assert rig.result(second).result.error_code == Result.SUCCESSFUL
