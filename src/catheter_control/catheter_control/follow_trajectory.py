@@ -4,11 +4,13 @@
     follow_trajectory --sim --preset traj_up_chirp        # bring up the simulated rig first
     follow_trajectory --file my_path.csv                  # columns t_s, angle_deg
 
-It validates the trajectory before anything moves, publishes it on ``trajectory``, shows
-progress, then prints RMSE, MAE (maximum absolute error) and NRMSE of ``tip/angle`` against
-``angle/desired``, saves a plot, and says where the bag is. A trajectory that does not start
-straight is preceded by a 1 s move from rest and a 1 s hold (``--lead-in-s``), which are not
-scored, as in the benchmarks.
+It validates the trajectory before anything moves, sends it to the compensator as a
+``follow_joint_trajectory`` goal (control_msgs/FollowJointTrajectory), shows progress from the
+goal's feedback, takes a refusal or an early stop from the goal's result, then prints RMSE,
+MAE (maximum absolute error) and NRMSE of ``tip/angle`` against ``angle/desired``, saves a
+plot, and says where the bag is. A trajectory that does not start straight is preceded by a
+1 s move from rest and a 1 s hold (``--lead-in-s``), which are not scored, as in the
+benchmarks.
 """
 
 from __future__ import annotations
@@ -276,11 +278,15 @@ def _run(
     lead_s: float,
 ) -> int:
     import rclpy
-    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    from action_msgs.msg import GoalStatus
+    from control_msgs.action import FollowJointTrajectory
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.action.client import ActionClient, ClientGoalHandle
     from rclpy.node import Node
+    from rclpy.task import Future
     from sensor_msgs.msg import JointState
     from tqdm import tqdm
-    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+    from trajectory_msgs.msg import JointTrajectoryPoint
 
     from catheter_control import qos
     from catheter_control.bringup import ProcessGraph
@@ -292,6 +298,7 @@ def _run(
         timing_summary,
         timing_text,
     )
+    from catheter_control.trajectory_action import ACTION_NAME
     from catheter_driver.messages import angle_rad_from, ns_from_time
     from catheter_models.contract import (
         ANGLE_DESIRED,
@@ -300,7 +307,6 @@ def _run(
         PRESSURE_COMMAND,
         PRESSURE_MEASURED,
         TIP_ANGLE,
-        TRAJECTORY,
     )
 
     data = _Collected()
@@ -321,10 +327,6 @@ def _run(
                 values = {kv.key: kv.value for kv in status.values}
                 if status.name.endswith("compensator"):
                     data.compensator.append((now, values))
-                    if status.message.startswith("trajectory refused"):
-                        data.refusal = status.message
-                    elif status.level == DiagnosticStatus.ERROR and not data.stopped:
-                        data.stopped = status.message
                 elif status.name.endswith(("sim_hardware", "valve_driver")):
                     data.driver.append((now, values))
                 elif status.name.endswith("recorder"):
@@ -335,7 +337,7 @@ def _run(
         node.create_subscription(JointState, ANGLE_DESIRED.name, on_desired, qos.RECORD)
         node.create_subscription(JointState, TIP_ANGLE.name, on_measured, qos.KEEP_EVERY_SAMPLE)
         node.create_subscription(DiagnosticArray, DIAGNOSTICS.name, on_diag, 10)
-        pub = node.create_publisher(JointTrajectory, TRAJECTORY.name, qos.TRAJECTORY)
+        action: ActionClient[Any, Any, Any] = ActionClient(node, FollowJointTrajectory, ACTION_NAME)
 
         # Wait for the graph: measurements flowing and the compensator listening.
         deadline = time.monotonic() + args.timeout_s
@@ -347,14 +349,15 @@ def _run(
                     print(f"--- {n} log ---\n{graph.log_tail(n)}", file=sys.stderr)
                 print(f"follow_trajectory: node(s) exited during start-up: {dead}", file=sys.stderr)
                 return EXIT_GRAPH
-            if data.measured and pub.get_subscription_count() >= 1:
+            if data.measured and action.server_is_ready():
                 break
         else:
             missing = []
             if not data.measured:
                 missing.append(f"no {node.resolve_topic_name(TIP_ANGLE.name)} samples")
-            if pub.get_subscription_count() == 0:
-                missing.append(f"nobody subscribes to {node.resolve_topic_name(TRAJECTORY.name)}")
+            if not action.server_is_ready():
+                # Actions resolve like topics: the namespace applies.
+                missing.append(f"no action server {node.resolve_topic_name(ACTION_NAME)}")
             print(
                 f"follow_trajectory: graph not ready after {args.timeout_s:g} s: "
                 + "; ".join(missing),
@@ -384,16 +387,26 @@ def _run(
                 )
                 return EXIT_GRAPH
 
-        msg = JointTrajectory()
-        msg.joint_names = [BEND_JOINT]
+        goal = FollowJointTrajectory.Goal()
+        goal.trajectory.joint_names = [BEND_JOINT]
         for t, a in zip(plan.t_s, plan.angle_rad, strict=True):
             point = JointTrajectoryPoint()
             point.positions = [float(a)]
             point.time_from_start.sec = math.floor(t)
             point.time_from_start.nanosec = round((t - math.floor(t)) * 1e9) % 1_000_000_000
-            msg.points.append(point)
+            goal.trajectory.points.append(point)
         data.desired.clear()
-        pub.publish(msg)
+        plan_time_s = [0.0]  # of the newest feedback: the bar shows the compensator's clock
+
+        def on_feedback(msg: Any) -> None:
+            elapsed = msg.feedback.desired.time_from_start
+            plan_time_s[0] = elapsed.sec + elapsed.nanosec * 1e-9
+
+        sending: Future[ClientGoalHandle[Any, Any, Any]] = action.send_goal_async(
+            goal, feedback_callback=on_feedback
+        )
+        result_future: Future[Any] | None = None
+        finished = False
         sent_at = time.monotonic()
         print(f"follow_trajectory: following {plan.name!r} ({plan.duration_s:.1f} s)")
         if lead_s:
@@ -418,9 +431,27 @@ def _run(
             if started_at is None and data.desired:
                 started_at = now
             if started_at is not None:
-                done_s = round(min(now - started_at, plan.duration_s), 1)
+                done_s = round(min(plan_time_s[0], plan.duration_s), 1)
                 if done_s > bar.n:
                     bar.update(done_s - bar.n)
+            if result_future is None and sending.done():
+                handle = sending.result()
+                if handle is None or not handle.accepted:
+                    data.refusal = "the goal was rejected"
+                else:
+                    result_future = handle.get_result_async()
+            if result_future is not None and result_future.done() and not finished:
+                finished = True
+                response = result_future.result()
+                status = GoalStatus.STATUS_UNKNOWN if response is None else response.status
+                outcome = (response and response.result.error_string) or f"status {status}"
+                if status != GoalStatus.STATUS_SUCCEEDED:
+                    # Aborted before a set-point went out: refused (the compensator's
+                    # reason); after: cut short, and the compensator ramped down.
+                    if started_at is None:
+                        data.refusal = outcome
+                    else:
+                        data.stopped = f"stopped: {outcome}; ramped down"
             if data.refusal:
                 bar.close()
                 print(
