@@ -24,7 +24,7 @@ import time
 
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from rclpy.qos import qos_profile_sensor_data
-from rclpy.subscription import Subscription
+from rclpy.subscription import MessageInfo, Subscription
 from sensor_msgs.msg import FluidPressure, JointState
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
@@ -371,7 +371,9 @@ class CompensatorNode(LifecycleLoopNode):
         )
         return None
 
-    def _on_trajectory(self, msg: JointTrajectory) -> None:
+    def _on_trajectory(self, msg: JointTrajectory, info: MessageInfo) -> None:
+        if self._action is not None and self._action.is_echo(info):
+            return  # an action goal's trajectory, republished for the record: already running
         self.submit_trajectory(msg)
 
     def stop_trajectory(self) -> None:

@@ -25,6 +25,9 @@ compensator the same message and get the same checks (:meth:`TrajectoryRunner.su
   cut short by the compensator (stale sensor, model failure, ``~/stop``, deactivation) aborts
   with ``INVALID_GOAL`` and the reason, as ros2_controllers' trajectory controller does for an
   abort that is not a tolerance.
+* **Record.** An accepted goal's trajectory is published on ``trajectory`` (transient local,
+  as a client of the topic would), so bags and live views show what ran whichever way it
+  came; the compensator skips this echo by its publisher (:meth:`TrajectoryActionServer.is_echo`).
 * **Cancel** ramps the pressure down at the slew limit (the compensator's ``~/stop``): a
   catheter left pressurised with no plan would stay bent in the patient. The goal ends
   ``CANCELED`` once the pressure command has reached zero.
@@ -49,14 +52,16 @@ from control_msgs.msg import JointTolerance
 from rclpy.action.server import ActionServer, CancelResponse, GoalResponse, ServerGoalHandle
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
+from rclpy.subscription import MessageInfo
 from rclpy.task import Future
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+from catheter_control import qos
 from catheter_control.trajectory import TrajectoryPlan
 from catheter_driver import messages
 from catheter_driver.polled import PolledTopics
-from catheter_models.contract import BEND_JOINT, TIP_ANGLE
+from catheter_models.contract import BEND_JOINT, TIP_ANGLE, TRAJECTORY
 from catheter_models.units import rad_to_deg
 
 ACTION_NAME = "follow_joint_trajectory"
@@ -175,6 +180,7 @@ class TrajectoryActionServer:
         self._tips = PolledTopics(
             node, {TIP_ANGLE.name: JointState}, qos_profile_sensor_data, raw=False, suffix="_action"
         )
+        self._echo = node.create_publisher(JointTrajectory, TRAJECTORY.name, qos.TRAJECTORY)
         self._server = ActionServer(
             node,
             FollowJointTrajectory,
@@ -191,6 +197,7 @@ class TrajectoryActionServer:
             self._finish(goal, "abort", Result.INVALID_GOAL, "the action server is shutting down")
         self._node.destroy_timer(self._timer)
         self._tips.destroy()
+        self._node.destroy_publisher(self._echo)
         self._server.destroy()
 
     # -- inputs ---------------------------------------------------------------------------
@@ -211,6 +218,19 @@ class TrajectoryActionServer:
         if self._tip is None or now_s - self._tip[0] > _TIP_FRESH_S:
             return None
         return self._tip[1]
+
+    def is_echo(self, info: MessageInfo) -> bool:
+        """Whether a ``trajectory`` message came from this server's own echo publisher."""
+        gid = info.get("publisher_gid")
+        if not gid:
+            return False
+        ours = [
+            bytes(pub.endpoint_gid)
+            for pub in self._node.get_publishers_info_by_topic(self._echo.topic_name)
+            if pub.node_name == self._node.get_name()
+            and pub.node_namespace == self._node.get_namespace()
+        ]
+        return bytes(gid["data"]) in ours
 
     def _on_cancel(self, goal_handle: _Handle) -> CancelResponse:
         for goal in self._goals:
@@ -275,6 +295,7 @@ class TrajectoryActionServer:
         plan = progress.pending or progress.following
         if plan is None:
             raise RuntimeError("the runner accepted a trajectory but shows no plan for it")
+        self._echo.publish(goal.trajectory)
         path_tol, _ = _tolerance_rad(list(goal.path_tolerance), "path_tolerance")
         goal_tol, _ = _tolerance_rad(list(goal.goal_tolerance), "goal_tolerance")
         running = _Goal(

@@ -3,7 +3,8 @@ processes (started and activated as bringup does), a client in the test process.
 
 One graph for the whole story a client lives through, to keep the suite short: goals the
 compensator must refuse come back with its reason and move nothing, a goal with path and goal
-tolerances runs to its end on the rig and succeeds, and a cancel mid-run ends with the
+tolerances runs to its end on the rig and succeeds (its trajectory republished on the topic
+for the record, without the compensator running it twice), and a cancel mid-run ends with the
 pressure command at zero.
 """
 
@@ -21,11 +22,12 @@ from control_msgs.msg import JointTolerance
 from graph_utils import Children, Probe, gauge_pa, trajectory_msg
 from rclpy.action.client import ActionClient
 from sensor_msgs.msg import FluidPressure
+from trajectory_msgs.msg import JointTrajectory
 
 from catheter_control import qos
 from catheter_control.bringup import sim_graph_specs
 from catheter_control.trajectory_action import ACTION_NAME
-from catheter_models.contract import BEND_JOINT, PRESSURE_COMMAND
+from catheter_models.contract import BEND_JOINT, PRESSURE_COMMAND, TRAJECTORY
 
 pytestmark = [
     pytest.mark.slow,
@@ -61,6 +63,7 @@ def test_refusals_success_and_cancel_over_dds(children: Children) -> None:
     children.graph(sim_graph_specs(None, compensator_params={"require_tip_angle": True}))
     with Probe(children.domain_id) as probe:
         commands = probe.subscribe(FluidPressure, PRESSURE_COMMAND.name, qos.KEEP_EVERY_SAMPLE)
+        recorded = probe.subscribe(JointTrajectory, TRAJECTORY.name, qos.TRAJECTORY)
         client = ActionClient(probe.node, FollowJointTrajectory, ACTION_NAME)
         assert probe.spin_until(client.server_is_ready, 40.0), (
             f"no {ACTION_NAME} server:\n{children.all_logs()}"
@@ -77,6 +80,7 @@ def test_refusals_success_and_cancel_over_dds(children: Children) -> None:
             assert reason in response.result.error_string, response.result.error_string
         probe.spin_for(0.5)
         assert not commands, "a refused goal sent pressure commands"
+        assert not recorded, "a refused goal's trajectory was republished"
 
         # Accepted, followed on the rig within its tolerances, succeeded. The c-LSTM tracks
         # to ~0.5 deg at worst (docs/benchmarks.md); feedback compares the newest sample with
@@ -94,6 +98,9 @@ def test_refusals_success_and_cancel_over_dds(children: Children) -> None:
         peak_desired_deg = max(math.degrees(f.desired.positions[0]) for f in measured)
         assert peak_desired_deg > 13.0, "feedback never showed the trajectory's peak"
         assert all(list(f.joint_names) == [BEND_JOINT] for f in measured)
+        # Republished once, as sent; had the compensator taken it as a new trajectory, the
+        # goal would have been pre-empted by its own echo and not succeeded above.
+        assert [r.msg.points[-1].time_from_start.sec for r in recorded] == [4]
 
         # Cancelled mid-run: the goal ends CANCELED, and only once the command is at zero,
         # long before the plan would have ended.
