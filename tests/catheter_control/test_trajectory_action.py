@@ -147,7 +147,7 @@ def rig() -> Iterator[Rig]:
         lambda angle_rad: tip_pub.publish(messages.joint_state(angle_rad, 0)),
     )
     try:
-        rig.spin_until(lambda: client.server_is_ready())
+        rig.spin_until(client.server_is_ready)
         yield rig
     finally:
         server.destroy()
