@@ -51,7 +51,7 @@ from control_msgs.action import FollowJointTrajectory
 from control_msgs.msg import JointTolerance
 from rclpy.action.server import ActionServer, CancelResponse, GoalResponse, ServerGoalHandle
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.subscription import MessageInfo
 from rclpy.task import Future
 from sensor_msgs.msg import JointState
@@ -71,6 +71,11 @@ Result = FollowJointTrajectory.Result
 _Handle = ServerGoalHandle[
     FollowJointTrajectory.Goal, FollowJointTrajectory.Result, FollowJointTrajectory.Feedback
 ]
+
+_NEWEST_SAMPLE = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT
+)
+"""Matches any tip/angle publisher (best effort takes reliable and best-effort offers)."""
 
 _TIP_FRESH_S = 0.5
 """A tip/angle sample older than this is not "the measured bend" any more [s]."""
@@ -176,9 +181,10 @@ class TrajectoryActionServer:
         self._goals: list[_Goal] = []
         self._tip: tuple[float, float] | None = None  # (received at [s], bend [rad])
         # Taken at the feedback rate, not dispatched 250 times a second by the executor that
-        # the compensator's control thread shares the GIL with (see catheter_driver.polled).
+        # the compensator's control thread shares the GIL with (see catheter_driver.polled);
+        # only the newest sample matters, so only it is kept.
         self._tips = PolledTopics(
-            node, {TIP_ANGLE.name: JointState}, qos_profile_sensor_data, raw=False, suffix="_action"
+            node, {TIP_ANGLE.name: JointState}, _NEWEST_SAMPLE, raw=False, suffix="_action"
         )
         self._echo = node.create_publisher(JointTrajectory, TRAJECTORY.name, qos.TRAJECTORY)
         self._server = ActionServer(
