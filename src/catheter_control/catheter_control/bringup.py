@@ -494,6 +494,8 @@ def main(argv: list[str] | None = None) -> None:
     except CatheterError as exc:
         print(f"bringup: {exc}", file=sys.stderr)
         raise SystemExit(2) from None
+    except KeyboardInterrupt:
+        return  # Ctrl-C while the nodes came up: start() has stopped them already
     try:
         while not graph.failed():
             time.sleep(0.2)
