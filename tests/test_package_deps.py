@@ -62,11 +62,13 @@ ROSDEP_KEYS: dict[str, str] = {
     "diagnostic_msgs": "diagnostic_msgs",
     "rcl_interfaces": "rcl_interfaces",
     "lifecycle_msgs": "lifecycle_msgs",
+    "action_msgs": "action_msgs",
     "ament_index_python": "ament_index_python",
     "launch": "launch",
     "launch_ros": "launch_ros",
     "control_msgs": "control_msgs",
     "tf2_msgs": "tf2_msgs",
+    "geometry_msgs": "geometry_msgs",
 }
 """Import root -> rosdep key. Check a new key in ros/rosdistro before adding it here."""
 
@@ -81,11 +83,13 @@ ROS_PACKAGES = frozenset(
         "diagnostic_msgs",
         "rcl_interfaces",
         "lifecycle_msgs",
+        "action_msgs",
         "ament_index_python",
         "launch",
         "launch_ros",
         "control_msgs",
         "tf2_msgs",
+        "geometry_msgs",
     }
 )
 """Keys that are ROS packages. They may stand without an import (a message package a node
@@ -94,6 +98,7 @@ serves through rclpy, e.g. lifecycle_msgs), so the stale check leaves them alone
 PIP_ONLY: dict[str, tuple[str, str]] = {
     "mcap": ("mcap", "no rosdep key for the mcap library (only mcap_vendor, which is C++)"),
     "onnx": ("onnx", "no rosdep key; used only to export trained networks"),
+    "foxglove": ("foxglove-sdk", "no rosdep key; the live view's Foxglove server"),
     "torch": (
         "torch",
         "python3-torch has no Ubuntu 24.04 package and python3-pytorch-pip is an EOL alias; "

@@ -11,7 +11,7 @@ setup(
     version="0.1.0",
     packages=find_packages(exclude=["test", "tests"]),
     # The shipped models (manifest + hashed weights) travel inside the package.
-    package_data={PACKAGE: ["py.typed", "data/*/*"]},
+    package_data={PACKAGE: ["py.typed", "data/*/*", "urdf/*.urdf", "foxglove/*.json"]},
     data_files=[
         # The ament resource marker and package.xml are what `ros2 run` and
         # ament_index_python look for; colcon installs them under share/.
@@ -22,6 +22,10 @@ setup(
             "share/" + PACKAGE + "/launch",
             [str(p) for p in sorted(Path("launch").glob("*.launch.py"))],
         ),
+        # The robot model where package://catheter_control/urdf/catheter.urdf resolves, and the
+        # Foxglove layout beside it (both also inside the Python package, for the live view).
+        ("share/" + PACKAGE + "/urdf", [PACKAGE + "/urdf/catheter.urdf"]),
+        ("share/" + PACKAGE + "/foxglove", [PACKAGE + "/foxglove/catheter_layout.json"]),
     ],
     install_requires=["setuptools"],
     zip_safe=False,
@@ -41,6 +45,8 @@ setup(
             "follow_trajectory = catheter_control.follow_trajectory:entry",
             "bringup = catheter_control.bringup:main",
             "bag_play = catheter_control.bag_play:entry",
+            "live_view = catheter_control.live_view:entry",
+            "tip_tf = catheter_control.tip_tf:main",
         ],
     },
 )

@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from catheter_control.live_view import LiveViewProcess, parse_port
 from catheter_control.models import COMPENSATORS, DEFAULT_COMPENSATOR, FEEDBACKS, SHIPPED
 from catheter_control.trajectory import (
     TrajectoryLimits,
@@ -38,7 +39,7 @@ from catheter_control.trajectory import (
 )
 from catheter_driver.laser_core import Calibration
 from catheter_models.contract import ANGLE_DESIRED, DEFAULT_NAMESPACE, TIP_ANGLE
-from catheter_models.errors import CatheterError
+from catheter_models.errors import CatheterError, ParameterError
 from catheter_models.gaps import find_gaps, say_gaps
 from catheter_models.signals import TEST_TRAJECTORIES, get_preset
 
@@ -155,6 +156,15 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
         "(0: normal scheduling; default: the nodes' own, 50)",
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument(
+        "--live",
+        nargs="?",
+        const=8765,
+        type=parse_port,
+        metavar="PORT",
+        help="stream the run to Foxglove on ws://localhost:PORT (8765 if not given; binds "
+        "127.0.0.1 only); see docs/deployment.md, Live view",
+    )
     # ROS arguments (after --ros-args) are rclpy's: -r __ns:=/x sets the namespace, and all
     # of them go to this tool's own node.
     from catheter_control.bringup import namespace_from_ros_args, split_ros_args
@@ -257,9 +267,19 @@ def main(argv: list[str] | None = None) -> int:
         except CatheterError as exc:  # a node failed configure/activate, or exited
             print(f"follow_trajectory: {exc}", file=sys.stderr)
             return EXIT_GRAPH
+    live = None
     try:
+        if args.live is not None:
+            try:
+                live = LiveViewProcess(args.live, args.namespace).start()
+            except ParameterError as exc:  # the port is taken or not allowed
+                print(f"follow_trajectory: {exc}", file=sys.stderr)
+                return EXIT_GRAPH
+            print(f"follow_trajectory: live view: Foxglove -> Open connection -> {live.url}")
         return _run(args, plan, run_dir, bag_path, graph, lead_s=lead_s)
     finally:
+        if live is not None:
+            print(live.stop())
         if graph is not None:
             graph.stop()
         if devices is not None:
