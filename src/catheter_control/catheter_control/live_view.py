@@ -362,7 +362,10 @@ class LiveView:
         lost = {t: n for t, n in self.lost().items() if n}
         text = f"live view on {self.url}: forwarded {forwarded} messages"
         if lost:
-            text += "; missed " + ", ".join(f"{n} of {t}" for t, n in lost.items())
+            text += "; missed " + ", ".join(
+                f"{n} of {t} ({100.0 * n / (n + self.stats[t].forwarded):.1f} %)"
+                for t, n in lost.items()
+            )
         else:
             text += ", missed none"
         if self.bad_tip_angle:
