@@ -22,6 +22,7 @@ from typing import Any, Literal, Protocol
 
 import numpy as np
 import numpy.typing as npt
+import scipy
 from scipy.optimize import OptimizeResult, differential_evolution, least_squares, minimize
 from tqdm import tqdm
 
@@ -29,6 +30,8 @@ from catheter_models.errors import ParameterError
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
+_DE_CALLBACK_TAKES_RESULT = tuple(int(part) for part in scipy.__version__.split(".")[:2]) >= (1, 12)
+"""differential_evolution passes ``intermediate_result`` to a callback from SciPy 1.12 on."""
 PolishMethod = Literal["least_squares", "L-BFGS-B", "none"]
 POLISH_METHODS: tuple[PolishMethod, ...] = ("least_squares", "L-BFGS-B", "none")
 
@@ -300,15 +303,27 @@ def identify(
 
     bar = tqdm(total=budget.max_generations, desc=label, unit="gen", disable=not progress)
 
-    def callback(intermediate_result: OptimizeResult) -> bool:
+    def on_generation(best_loss: float) -> bool:
         nonlocal stopped_by
-        history.append(float(intermediate_result.fun))
+        history.append(best_loss)
         bar.update(1)
-        bar.set_postfix_str(f"loss {intermediate_result.fun:.5g}")
+        bar.set_postfix_str(f"loss {best_loss:.5g}")
         if time.perf_counter() > search_deadline:
             stopped_by = "wall_time"
             return True
         return False
+
+    callback: Callable[..., bool]
+    if _DE_CALLBACK_TAKES_RESULT:
+
+        def callback(intermediate_result: OptimizeResult) -> bool:
+            return on_generation(float(intermediate_result.fun))
+
+    else:
+        # SciPy < 1.12 (Ubuntu 24.04's 1.11) hands the callback only the best member, not its
+        # loss: one more evaluation per generation gives the same history.
+        def callback(xk: FloatArray, convergence: float = 0.0) -> bool:
+            return on_generation(float(vectorized_loss(xk)[0]))
 
     start = None
     if x0 is not None:
