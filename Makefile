@@ -5,19 +5,40 @@ BIN := $(VENV)/bin
 PY := $(BIN)/python
 PRESET ?= traj_descending_sine
 
-.PHONY: setup demo test test-loaded test-fast test-slow lint typecheck bench bench-models soak soak-loaded faults lab-example figures \
+.PHONY: setup setup-runtime lock test-distro demo test test-loaded test-fast test-slow lint typecheck bench bench-models soak soak-loaded faults lab-example figures \
 	sample-bags shipped-models colcon clean
 
+INSTALL_DEPS := scripts/setup_env.sh src/catheter_models/setup.py src/catheter_driver/setup.py \
+	src/catheter_control/setup.py scripts/build_interfaces.sh $(shell find ros2_ws/interfaces -type f)
+
+## Everything, from requirements-lock.txt (hashes checked): runtime, training extra, tests.
 setup: $(VENV)/.installed
 
-$(VENV)/.installed: requirements.txt requirements-dev.txt scripts/setup_env.sh \
-		src/catheter_models/setup.py src/catheter_driver/setup.py src/catheter_control/setup.py \
-		scripts/build_interfaces.sh $(shell find ros2_ws/interfaces -type f)
+$(VENV)/.installed: requirements-lock.txt $(INSTALL_DEPS)
 	scripts/setup_env.sh $(VENV)
+
+## What running the graph needs (requirements-runtime-lock.txt): no torch, no onnx.
+setup-runtime: $(VENV)/.installed-runtime
+
+$(VENV)/.installed-runtime: requirements-runtime-lock.txt $(INSTALL_DEPS)
+	scripts/setup_env.sh --runtime $(VENV)
+
+## Regenerate the locks and docker/constraints.txt from requirements*.txt (scripts/lock.sh).
+lock:
+	scripts/lock.sh
+
+## The fast tests under Ubuntu 24.04's numpy, scipy, scikit-learn, matplotlib and numba (the
+## versions the container image gets), in their own venv (requirements-distro-lock.txt).
+DISTRO_VENV ?= .venv-distro
+$(DISTRO_VENV)/.installed: requirements-distro-lock.txt $(INSTALL_DEPS)
+	scripts/setup_env.sh --distro $(DISTRO_VENV)
+
+test-distro: $(DISTRO_VENV)/.installed
+	$(DISTRO_VENV)/bin/pytest -m "not slow"
 
 ## The main job: bring up the simulated rig as separate ROS 2 processes, follow a thesis
 ## trajectory, print the tracking report, save the plot and the bag.
-demo: setup
+demo: setup-runtime
 	$(BIN)/follow_trajectory --sim --preset $(PRESET)
 
 ## All tests, the slow integration tests included (this is what .ci/run calls).

@@ -35,6 +35,7 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 PACKAGES = ("catheter_models", "catheter_driver", "catheter_control")
 DOCKERFILE = REPO / "docker" / "Dockerfile"
+CONSTRAINTS = REPO / "docker" / "constraints.txt"
 
 ROSDEP_KEYS: dict[str, str] = {
     # rosdep system keys (ros/rosdistro rosdep/python.yaml)
@@ -106,7 +107,8 @@ PIP_ONLY: dict[str, tuple[str, str]] = {
     ),
 }
 """Import root -> (pip distribution, why not rosdep). Not in package.xml: docker/Dockerfile
-installs them (checked below), and the venv has them from requirements.txt."""
+pip-installs them, pinned by docker/constraints.txt (checked below), and the venv has them
+from the lock."""
 
 
 @dataclass(frozen=True)
@@ -223,12 +225,22 @@ def test_no_stale_or_unknown_exec_depend(pkg: str) -> None:
 
 def test_pip_only_imports_are_installed_by_the_image() -> None:
     dockerfile = DOCKERFILE.read_text()
+    # Each command of a RUN on one line: continuations joined, `&&` and `;` split.
+    commands = re.split(r"&&|;|\n", dockerfile.replace("\\\n", " "))
+    pip_installs = " ".join(c for c in commands if "pip3 install" in c)
+    pinned = dict(
+        line.split("==", 1) for line in CONSTRAINTS.read_text().splitlines() if "==" in line
+    )
     declared = {key for pkg in PACKAGES for key in exec_depends(pkg)}
     for root, (dist, reason) in PIP_ONLY.items():
         assert reason
         assert root not in ROSDEP_KEYS, f"{root} is both in ROSDEP_KEYS and PIP_ONLY"
-        assert re.search(rf"(?<![\w-]){re.escape(dist)}==", dockerfile), (
-            f"{root} has no rosdep key, so docker/Dockerfile must pip-install {dist}==<version>"
+        assert re.search(rf"(?<![\w-]){re.escape(dist)}(?![\w-])", pip_installs), (
+            f"{root} has no rosdep key, so docker/Dockerfile must pip-install {dist}"
+        )
+        assert dist.lower() in pinned, (
+            f"docker/constraints.txt does not pin {dist}: add it to requirements*.txt and run "
+            "`make lock`"
         )
         guesses = {root, f"python3-{root}", f"python3-{root}-pip"} & declared
         assert not guesses, f"{root} has no usable rosdep key, yet package.xml names {guesses}"
