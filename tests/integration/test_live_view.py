@@ -1,4 +1,5 @@
-"""`follow_trajectory --sim --live`: a Foxglove client sees the run as it happens.
+"""`follow_trajectory --sim --live`: a Foxglove client sees the run as it happens; `tip_tf`
+turns tip/angle into the ROS conventions (joint_states, robot_description, TF).
 
 The client is a plain WebSocket client speaking the protocol Foxglove speaks (the SDK's server
 names it ``foxglove.sdk.v1``): it reads the advertised channels, decodes what it receives with
@@ -18,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from graph_utils import Children
+from graph_utils import Children, Probe, node_argv
 
 from catheter_control.tip_tf import URDF_PACKAGE_URL, urdf_text
 
@@ -152,3 +153,47 @@ def test_follow_trajectory_streams_the_run_to_a_foxglove_client(
     assert max(seen["desired_deg"]) == pytest.approx(10.0, abs=0.01)
     log = children.log("follow_trajectory")
     assert f"live view on ws://localhost:{port}: forwarded" in log, log
+
+
+def test_tip_tf_publishes_the_model_and_its_transforms(children: Children) -> None:
+    """What robot_state_publisher would give, from tip/angle: TF, joint_states, the URDF."""
+    pytest.importorskip("tf2_msgs.msg", reason="tf2_msgs is built by scripts/build_interfaces.sh")
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import String
+    from tf2_msgs.msg import TFMessage
+
+    from catheter_control import qos
+    from catheter_driver.messages import joint_state
+
+    latched = QoSProfile(
+        depth=1,
+        reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL,
+    )
+    children.start("tip_tf", node_argv("catheter_control.tip_tf"))
+    with Probe(children.domain_id) as probe:
+        tf = probe.subscribe(TFMessage, "/tf", 100)
+        tf_static = probe.subscribe(TFMessage, "/tf_static", latched)
+        description = probe.subscribe(String, "robot_description", latched)
+        states = probe.subscribe(JointState, "joint_states", 100)
+        pub = probe.node.create_publisher(JointState, "tip/angle", qos.STREAM)
+        angle_rad = math.radians(20.0)
+        stamp_ns = time.time_ns()
+
+        def send_until_seen() -> bool:
+            nonlocal stamp_ns
+            stamp_ns += 4_000_000
+            pub.publish(joint_state(angle_rad, stamp_ns))
+            return bool(tf and states and tf_static and description)
+
+        assert probe.spin_until(send_until_seen, 60.0), children.log("tip_tf")
+    assert description[-1].msg.data == urdf_text()
+    moving = tf[-1].msg.transforms[0]
+    assert (moving.header.frame_id, moving.child_frame_id) == ("base_link", "bend_distal")
+    yaw = 2.0 * math.atan2(moving.transform.rotation.z, moving.transform.rotation.w)
+    assert yaw == pytest.approx(angle_rad)
+    fixed = tf_static[-1].msg.transforms[0]
+    assert (fixed.header.frame_id, fixed.child_frame_id) == ("bend_distal", "tip")
+    assert list(states[-1].msg.name) == ["bend"]
+    assert states[-1].msg.position[0] == pytest.approx(angle_rad)
