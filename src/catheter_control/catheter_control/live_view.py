@@ -1,4 +1,4 @@
-"""Stream the running graph to Foxglove over a WebSocket (``foxglove.websocket.v1``).
+"""Stream the running graph to Foxglove over a WebSocket (subprotocol ``foxglove.sdk.v1``).
 
     follow_trajectory --sim --live           # then Foxglove: Open connection, ws://localhost:8765
     live_view --port 8765                    # beside any running graph, on its own
@@ -11,12 +11,13 @@ run and a recorded bag alike. Beside them it sends what the view needs and a bag
 (``robot_description``, and as the asset ``package://catheter_control/urdf/catheter.urdf``),
 ``joint_states`` and ``/tf`` + ``/tf_static`` from ``tip/angle`` (:mod:`catheter_control.tip_tf`).
 
-It stays off the control path. It runs in the process that starts it (``follow_trajectory``),
-never in the compensator; it subscribes best effort, so no publisher ever re-sends to it or
-waits for it; it takes messages raw (no deserialising, except ``tip/angle`` for the TF) on
-rclpy's EventsExecutor in a thread of its own. What it misses it counts: a sample that never
-reached it shows as a gap in the stream's header stamps (``catheter_models.gaps``), and
-:meth:`LiveView.stats` and the ``live_view`` status on ``/diagnostics`` report it per topic.
+It stays off the control path. It never runs in the compensator: ``follow_trajectory --live``
+starts it as a child process at niceness 10 (:class:`LiveViewProcess`); it subscribes best
+effort, so no publisher ever re-sends to it or waits for it; it takes messages raw (no
+deserialising, except ``tip/angle`` for the TF) on rclpy's EventsExecutor in a thread of its
+own. What it misses it counts: a sample that never reached it shows as a gap in the stream's
+header stamps (``catheter_models.gaps``), and :meth:`LiveView.summary` and the ``live_view``
+status on ``/diagnostics`` report it per topic.
 A Foxglove client that reads too slowly loses its own oldest messages in the server's
 per-client queue (``message_backlog_size``); the server does not report those.
 
@@ -85,8 +86,8 @@ _REPEAT_S: Final = 1.0
 """How often the URDF and the static transform are sent again: a WebSocket channel has no
 latching, and a client that connects later needs them too."""
 _DEPTH: Final = 250
-"""Reader history per topic (1 s at 250 Hz): the executor thread may be held up that long
-by the GIL before samples are overwritten (and then counted as lost)."""
+"""Reader history per topic (1 s at 250 Hz): the niced view may wait that long for a CPU on a
+busy machine before samples are overwritten (and then counted as lost)."""
 BACKLOG: Final = 4096
 """Messages the server queues for one slow client (about 3 s of everything) before it drops
 that client's oldest."""
