@@ -423,12 +423,18 @@ def main(argv: list[str] | None = None) -> int:
         default=DEFAULT_HOST,
         help="address to bind (default 127.0.0.1; the server has no authentication)",
     )
-    parser.add_argument("--namespace", default=DEFAULT_NAMESPACE)
+    parser.add_argument(
+        "--namespace", default=DEFAULT_NAMESPACE, help="the graph's (or -r __ns:=/x)"
+    )
     parser.add_argument(
         "--nice", type=int, default=NICE, help=f"niceness increment (default {NICE})"
     )
     given = sys.argv[1:] if argv is None else argv
     args = parser.parse_args(remove_ros_args(["live_view", *given])[1:])
+    # `--ros-args -r __ns:=/x` names the graph's namespace, as for the other executables.
+    remapped = [a.removeprefix("__ns:=") for a in given if a.startswith("__ns:=")]
+    if remapped:
+        args.namespace = remapped[-1]
     os.nice(args.nice)
     parent_pid = os.getppid()
     try:
