@@ -33,8 +33,10 @@ DISTRO_VENV ?= .venv-distro
 $(DISTRO_VENV)/.installed: requirements-distro-lock.txt $(INSTALL_DEPS)
 	scripts/setup_env.sh --distro $(DISTRO_VENV)
 
+# numba's kernel cache apart from .venv's: the two numba versions would overwrite each other's
+# cache beside the sources, and the recompiles eat the lab tests' wall-time budgets.
 test-distro: $(DISTRO_VENV)/.installed
-	$(DISTRO_VENV)/bin/pytest -m "not slow"
+	NUMBA_CACHE_DIR=$(abspath $(DISTRO_VENV))/numba-cache $(DISTRO_VENV)/bin/pytest -m "not slow"
 
 ## The main job: bring up the simulated rig as separate ROS 2 processes, follow a thesis
 ## trajectory, print the tracking report, save the plot and the bag.
