@@ -7,9 +7,10 @@ import signal
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
-from graph_utils import Children, Probe, diagnostic_values, statuses
+from graph_utils import Children, Probe, diagnostic_values, gauge_pa, statuses, trajectory_msg
 from sensor_msgs.msg import JointState
 
 from catheter_control import qos
@@ -60,3 +61,47 @@ def test_a_failed_configure_stops_the_graph_and_names_the_node_and_why(
     graph = children.graphs[-1]
     assert all(p.poll() is not None for p in graph.procs.values())
     assert not any(p.returncode == -signal.SIGKILL for p in graph.procs.values())
+
+
+def test_deactivating_the_compensator_mid_run_ramps_the_pressure_down(
+    children: Children,
+) -> None:
+    from lifecycle_msgs.msg import Transition
+    from lifecycle_msgs.srv import ChangeState
+    from sensor_msgs.msg import FluidPressure
+    from trajectory_msgs.msg import JointTrajectory
+
+    from catheter_models.contract import PRESSURE_COMMAND, TRAJECTORY
+
+    children.graph(sim_graph_specs())
+    with Probe(children.domain_id) as probe:
+        commands = probe.subscribe(FluidPressure, PRESSURE_COMMAND.name, qos.RECORD)
+        pub = probe.node.create_publisher(JointTrajectory, TRAJECTORY.name, qos.TRAJECTORY)
+        assert probe.spin_until(lambda: pub.get_subscription_count() > 0, 30.0)
+        # Up to 20 deg and hold: a run that would last 12 s.
+        pub.publish(trajectory_msg([(0.0, 0.0), (2.0, 20.0), (12.0, 20.0)]))
+        assert probe.spin_until(
+            lambda: len(commands) > 25 and gauge_pa(commands[-25:]).min() > 1.0e5, 20.0
+        ), f"{len(commands)} commands, last {gauge_pa(commands[-5:])}"
+
+        client = probe.node.create_client(ChangeState, "/catheter/compensator/change_state")
+        assert client.wait_for_service(timeout_sec=10.0)
+        request = ChangeState.Request()
+        request.transition.id = Transition.TRANSITION_DEACTIVATE
+        n_before = len(commands)
+        future = client.call_async(request)
+        assert probe.spin_until(future.done, 30.0)
+        assert future.result().success
+        probe.spin_for(0.5)
+        sent = gauge_pa(commands[n_before - 1 :])
+        steps = np.diff(sent)
+        falling = int(np.flatnonzero(steps < -1.0e3)[0])
+        # Holding 20 deg until the request; the answer comes once the command is down: at
+        # the slew limit (20 bar/s, 8000 Pa per 4 ms tick), never up, ending at zero; then
+        # the loop is stopped and silent.
+        assert np.all(np.abs(sent[: falling + 1] - sent[0]) < 1.0e3), sent[: falling + 1]
+        assert np.all((steps[falling:] <= 1e-6) & (steps[falling:] >= -8.0e3 - 1e-6)), steps
+        assert sent[-1] == 0.0, sent[-5:]
+        silent_from = len(commands)
+        probe.spin_for(0.5)
+        assert len(commands) == silent_from, "a deactivated compensator still commands"

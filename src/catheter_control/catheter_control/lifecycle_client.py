@@ -20,7 +20,7 @@ from typing import Any
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from lifecycle_msgs.msg import Transition
-from lifecycle_msgs.srv import ChangeState
+from lifecycle_msgs.srv import ChangeState, GetState
 from rclpy.context import Context
 from rclpy.executors import Executor, SingleThreadedExecutor
 from rclpy.node import Node
@@ -72,6 +72,9 @@ class LifecycleManager(Node):
         self._change_state: dict[str, Any] = {
             name: self.create_client(ChangeState, f"{name}/change_state") for name in managed
         }
+        self._get_state: dict[str, Any] = {
+            name: self.create_client(GetState, f"{name}/get_state") for name in managed
+        }
         self._status: dict[str, tuple[int, str]] = {}
         self.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 50)
         self.active: list[str] = []
@@ -120,7 +123,8 @@ class LifecycleManager(Node):
             raise LifecycleError(f"{name}: cannot {label}: {gone[0]}")
         response: Any = future.result()
         if response is None or not response.success:
-            raise LifecycleError(f"{name}: {label} failed: {self._reason(executor, name)}")
+            reason = self._reason(executor, name).removeprefix(f"{label} failed: ")
+            raise LifecycleError(f"{name}: {label} failed: {reason}")
         self.get_logger().info(f"{name}: {label}d")
 
     def _reason(self, executor: Executor, name: str) -> str:
@@ -138,14 +142,30 @@ class LifecycleManager(Node):
             self.change_state(executor, name, ACTIVATE)
             self.active.append(name)
 
+    def state_of(self, executor: Executor, name: str) -> str:
+        """The node's lifecycle state label (``active``), or '' if it does not answer in 5 s."""
+        client = self._get_state[name]
+        if not client.service_is_ready():
+            return ""
+        future = client.call_async(GetState.Request())
+        if not self._spin(executor, future.done, 5.0):
+            client.remove_pending_request(future)
+            return ""
+        response: Any = future.result()
+        return "" if response is None else str(response.current_state.label)
+
     def wind_down(self, executor: Executor) -> list[str]:
         """Deactivate ``deactivate_first`` nodes that are active; the failures, by name.
 
         Never raises: shutdown goes on (the drivers' watchdogs vent) whatever happens here.
+        A node someone else deactivated meanwhile (``ros2 lifecycle set``) is left alone.
         """
         failures = []
         for name in self.deactivate_first:
             if name not in self.active or self.is_gone(name):
+                continue
+            if self.state_of(executor, name) != "active":
+                self.active.remove(name)
                 continue
             try:
                 self.change_state(executor, name, DEACTIVATE)
