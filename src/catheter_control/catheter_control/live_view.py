@@ -39,6 +39,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Final
 
 from catheter_control.tip_tf import URDF_PACKAGE_URL, TipTf, chain, urdf_text
+from catheter_driver import diagnostics
 from catheter_models.contract import (
     ANGLE_DESIRED,
     DEFAULT_NAMESPACE,
@@ -193,8 +194,6 @@ class LiveView:
         self._tip_tf = TipTf(self._node)
         for spec in FORWARDED:
             self._forward(spec)
-        from catheter_driver import diagnostics
-
         self._diag_pub = diagnostics.create_diagnostics_publisher(self._node)
         self._node.create_timer(1.0, self._publish_diagnostics)
         self._executor = EventsExecutor(context=self._context)
@@ -374,8 +373,6 @@ class LiveView:
         return text
 
     def _publish_diagnostics(self) -> None:
-        from catheter_driver import diagnostics
-
         values: dict[str, object] = {"url": self.url}
         values.update({f"forwarded {t}": s.forwarded for t, s in self.stats.items()})
         values.update({f"lost {t}": n for t, n in self.lost().items()})
