@@ -308,7 +308,10 @@ def test_sim_launch_starts_what_bringup_starts(
 ) -> None:
     fakes, resolve = run_launch_file("sim.launch.py")
     specs = sim_graph_specs(
-        Path("bag"), {"source": "x"}, compensator_params=dict(SIM_COMPENSATOR_PARAMS)
+        Path("bag"),
+        {"source": "x"},
+        compensator_params=dict(SIM_COMPENSATOR_PARAMS),
+        with_tf=True,
     )
     # The bag's path and its metadata name the run: they differ by design.
     _check_same(fakes, resolve, specs, node_defaults, per_run={"bag_path", "custom_data"})
@@ -318,13 +321,15 @@ def test_rig_launch_starts_the_drivers_bringup_points_at_devices(
     run_launch_file: Any, node_defaults: dict[str, dict[str, Any]]
 ) -> None:
     fakes, resolve = run_launch_file("rig.launch.py")
-    recorder, _sim, compensator = sim_graph_specs(Path("bag"), {"source": "x"})
+    recorder, _sim, compensator, tip_tf = sim_graph_specs(
+        Path("bag"), {"source": "x"}, with_tf=True
+    )
     ports = {
         "keller_serial": {"port": "/dev/a"},
         "dac_serial": {"port": "/dev/b"},
         "adc_serial": {"port": "/dev/c"},
     }
-    specs = [recorder, *driver_specs(ports, Path("cal.json")), compensator]
+    specs = [recorder, *driver_specs(ports, Path("cal.json")), compensator, tip_tf]
     # The drivers' devices come from the shipped parameter files on the rig, from the
     # emulator's ports under bringup; the compensator runs with its own defaults on both.
     device_keys = {k for s in specs for k in s.params if s.name in {"valve_driver", "laser_angle"}}

@@ -27,6 +27,8 @@ def test_composed_bringup_activates_every_node_in_the_ros_args_namespace(
     proc = children.start("bringup", [*bringup, "--ros-args", "-r", "__ns:=/x"])
     with Probe(children.domain_id) as probe:
         angles = probe.subscribe(JointState, "/x/tip/angle", qos.KEEP_EVERY_SAMPLE)
+        # tip_tf, which bringup starts beside the graph for a person watching in RViz.
+        joints = probe.subscribe(JointState, "/x/joint_states", qos.KEEP_EVERY_SAMPLE)
         diags = probe.subscribe(DiagnosticArray, "/diagnostics", 50)
 
         def compensator_armed() -> bool:
@@ -35,8 +37,10 @@ def test_composed_bringup_activates_every_node_in_the_ros_args_namespace(
             return bool(values) and "ticks" in values[-1]
 
         # Start-up on a busy 2-core machine: imports, model load, discovery.
-        assert probe.spin_until(lambda: len(angles) > 50 and compensator_armed(), 90.0), (
-            f"{len(angles)} tip/angle samples; compensator statuses "
+        assert probe.spin_until(
+            lambda: len(angles) > 50 and len(joints) > 5 and compensator_armed(), 90.0
+        ), (
+            f"{len(angles)} tip/angle samples, {len(joints)} joint_states; compensator statuses "
             f"{[s.message for s in statuses(diags, 'x/compensator')][-3:]}"
         )
     proc.send_signal(signal.SIGINT)

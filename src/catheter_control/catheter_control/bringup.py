@@ -101,9 +101,16 @@ def sim_graph_specs(
     custom_data: Mapping[str, str] | None = None,
     sim_params: Params | None = None,
     compensator_params: Params | None = None,
+    *,
     with_compensator: bool = True,
+    with_tf: bool = False,
 ) -> list[NodeSpec]:
-    """The simulated graph, in start order: recorder, rig, compensator."""
+    """The simulated graph, in start order: recorder, rig, compensator, and ``tip_tf``.
+
+    ``tip_tf`` (the robot model and its transforms, for RViz or Foxglove) is what a person
+    at the rig looks at; runs that only score or record leave it out (``with_tf=False``),
+    since it is one more process beside the control loop.
+    """
     specs = []
     if bag_path is not None:
         specs.append(
@@ -122,6 +129,8 @@ def sim_graph_specs(
                 "compensator", "catheter_control.compensator_node", dict(compensator_params or {})
             )
         )
+    if with_tf:
+        specs.append(NodeSpec("tip_tf", "catheter_control.tip_tf"))
     return specs
 
 
@@ -448,6 +457,11 @@ def parse_args(argv: Sequence[str]) -> tuple[argparse.Namespace, list[str]]:
     parser.add_argument("--compose", action="store_true", help="all nodes in one process")
     parser.add_argument("--no-compensator", action="store_true", help="rig (and recorder) only")
     parser.add_argument(
+        "--no-tf",
+        action="store_true",
+        help="leave out tip_tf (robot_description, joint_states and /tf from tip/angle)",
+    )
+    parser.add_argument(
         "--sim-param",
         action="append",
         default=[],
@@ -482,6 +496,7 @@ def main(argv: list[str] | None = None) -> None:
         sim_params,
         SIM_COMPENSATOR_PARAMS,
         with_compensator=not args.no_compensator,
+        with_tf=not args.no_tf,
     )
     if args.compose:
         code = run_composed(specs, args.namespace, ros_args)

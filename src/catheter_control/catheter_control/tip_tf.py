@@ -25,7 +25,13 @@ from dataclasses import dataclass
 from functools import cache
 from typing import Any, Final
 
-from catheter_models.contract import BEND_JOINT
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+
+from catheter_control import qos
+from catheter_driver.messages import angle_rad_from, ns_from_time
+from catheter_driver.node_main import run_node
+from catheter_models.contract import BEND_JOINT, TIP_ANGLE
 from catheter_models.errors import ParameterError
 
 URDF_RESOURCE: Final = "urdf/catheter.urdf"
@@ -232,40 +238,35 @@ class TipTf:
         return out
 
 
+class TipTfNode(Node):
+    """``tip_tf`` as a node: ``tip/angle`` in, :class:`TipTf`'s topics out."""
+
+    def __init__(self) -> None:
+        super().__init__("tip_tf")
+        rate = float(self.declare_parameter("max_rate_hz", MAX_RATE_HZ).value)
+        self.tf = TipTf(self, rate)
+        self.bad_samples = 0
+        self.create_subscription(JointState, TIP_ANGLE.name, self._on_angle, qos.SENSOR)
+        if not self.tf.tf_published:
+            self.get_logger().warning(
+                "tf2_msgs is not installed: publishing joint_states and robot_description "
+                "only (a robot_state_publisher turns them into /tf)"
+            )
+
+    def _on_angle(self, msg: JointState) -> None:
+        try:
+            angle_rad = angle_rad_from(msg)
+        except ValueError as exc:
+            # Someone else's driver may name its joints differently: say so, once.
+            if not self.bad_samples:
+                self.get_logger().error(f"tip/angle: {exc}; no TF from such samples")
+            self.bad_samples += 1
+            return
+        self.tf.on_angle(ns_from_time(msg.header.stamp), angle_rad)
+
+
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run catheter_control tip_tf``."""
-    from rclpy.node import Node
-    from sensor_msgs.msg import JointState
-
-    from catheter_control import qos
-    from catheter_driver.messages import angle_rad_from, ns_from_time
-    from catheter_driver.node_main import run_node
-    from catheter_models.contract import TIP_ANGLE
-
-    class TipTfNode(Node):
-        def __init__(self) -> None:
-            super().__init__("tip_tf")
-            rate = float(self.declare_parameter("max_rate_hz", MAX_RATE_HZ).value)
-            self.tf = TipTf(self, rate)
-            self.bad_samples = 0
-            self.create_subscription(JointState, TIP_ANGLE.name, self._on_angle, qos.SENSOR)
-            if not self.tf.tf_published:
-                self.get_logger().warning(
-                    "tf2_msgs is not installed: publishing joint_states and robot_description "
-                    "only (a robot_state_publisher turns them into /tf)"
-                )
-
-        def _on_angle(self, msg: JointState) -> None:
-            try:
-                angle_rad = angle_rad_from(msg)
-            except ValueError as exc:
-                # Someone else's driver may name its joints differently: say so, once.
-                if not self.bad_samples:
-                    self.get_logger().error(f"tip/angle: {exc}; no TF from such samples")
-                self.bad_samples += 1
-                return
-            self.tf.on_angle(ns_from_time(msg.header.stamp), angle_rad)
-
     code = run_node(TipTfNode, args)
     if code:
         raise SystemExit(code)

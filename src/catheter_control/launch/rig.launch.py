@@ -140,6 +140,12 @@ def generate_launch_description() -> LaunchDescription:
             "record", default_value="true", choices=["true", "false"], description="run recorder"
         ),
         DeclareLaunchArgument(
+            "tf",
+            default_value="true",
+            choices=["true", "false"],
+            description="run tip_tf: robot_description, joint_states and /tf from tip/angle",
+        ),
+        DeclareLaunchArgument(
             "bag_path",
             default_value=default_bag,
             description="new bag directory (must not exist)",
@@ -213,6 +219,14 @@ def generate_launch_description() -> LaunchDescription:
         ],
         output="screen",
     )
+    tip_tf = Node(
+        package="catheter_control",
+        executable="tip_tf",
+        name="tip_tf",
+        namespace=namespace,
+        condition=IfCondition(LaunchConfiguration("tf")),
+        output="screen",
+    )
     return LaunchDescription(
         [
             *arguments,
@@ -220,6 +234,7 @@ def generate_launch_description() -> LaunchDescription:
             valve_driver,
             laser_angle,
             compensator,
+            tip_tf,
             *configure_then_activate(valve_driver),
             *configure_then_activate(laser_angle),
             *configure_then_activate(compensator),

@@ -125,6 +125,12 @@ def generate_launch_description() -> LaunchDescription:
             "record", default_value="true", choices=["true", "false"], description="run recorder"
         ),
         DeclareLaunchArgument(
+            "tf",
+            default_value="true",
+            choices=["true", "false"],
+            description="run tip_tf: robot_description, joint_states and /tf from tip/angle",
+        ),
+        DeclareLaunchArgument(
             "bag_path",
             default_value=default_bag,
             description="new bag directory (must not exist)",
@@ -190,12 +196,21 @@ def generate_launch_description() -> LaunchDescription:
         ],
         output="screen",
     )
+    tip_tf = Node(
+        package="catheter_control",
+        executable="tip_tf",
+        name="tip_tf",
+        namespace=namespace,
+        condition=IfCondition(LaunchConfiguration("tf")),
+        output="screen",
+    )
     return LaunchDescription(
         [
             *arguments,
             recorder,
             sim_hardware,
             compensator,
+            tip_tf,
             *configure_then_activate(sim_hardware),
             *configure_then_activate(compensator),
         ]
