@@ -301,6 +301,10 @@ class ExciteInProcess:
         from catheter_control.excite_node import ExciteNode
 
         cmd = qualify(PRESSURE_COMMAND)
+        # The rig's streams reaching the probe does not mean the probe has discovered the
+        # rig's and the recorder's command subscriptions yet: each endpoint is announced on its
+        # own (a clean-clone CI run counted 1 of 2 here, with both nodes up).
+        probe.spin_until(lambda: probe.node.count_subscribers(cmd) >= 2, 20.0)
         subscribers = probe.node.count_subscribers(cmd)
         assert subscribers >= 2, f"{subscribers} subscribers on {cmd}: rig and recorder?"
         heard_before = int(recorder_values(probe).get(f"publishers {cmd}", "0"))
