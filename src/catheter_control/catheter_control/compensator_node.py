@@ -294,9 +294,7 @@ class CompensatorNode(LifecycleLoopNode):
             self.get_logger().info(f"{why}: ramping the pressure down before the loop stops")
             # The loop thread does the ramp at the slew limit; bounded in case it has died.
             give_up_s = time.monotonic() + self.pmax_pa / self.slew_pa_per_s + 2.0
-            while (
-                core.state != ControlCore.IDLE and loop.running and time.monotonic() < give_up_s
-            ):
+            while core.state != ControlCore.IDLE and loop.running and time.monotonic() < give_up_s:
                 time.sleep(loop.period_s)
             if core.state != ControlCore.IDLE:
                 self.get_logger().error(
