@@ -26,13 +26,17 @@ FloatArray = npt.NDArray[np.float64]
 def isotonic_increasing(values: FloatArray, weights: FloatArray) -> FloatArray:
     """Weighted least-squares projection of ``values`` onto non-decreasing sequences.
 
-    Pool adjacent violators, exact in one pass. Ours rather than SciPy's
+    scikit-learn's pool-adjacent-violators rather than SciPy's
     ``optimize.isotonic_regression``, which needs SciPy >= 1.12: Ubuntu 24.04 (the container
     image) ships 1.11, and one implementation keeps the fitted map identical on both.
 
     Raises:
         ParameterError: Shapes differ, or a weight is not positive and finite.
     """
+    # Imported here, as models/svr.py does: scikit-learn costs its import time only where a
+    # map is fitted, not in every process that loads one.
+    from sklearn.isotonic import isotonic_regression
+
     values = np.asarray(values, dtype=np.float64)
     weights = np.asarray(weights, dtype=np.float64)
     if values.ndim != 1 or values.shape != weights.shape:
@@ -42,23 +46,8 @@ def isotonic_increasing(values: FloatArray, weights: FloatArray) -> FloatArray:
         )
     if not (np.isfinite(weights).all() and (weights > 0).all()):
         raise ParameterError("isotonic fit: every weight must be positive and finite")
-    levels: list[float] = []
-    level_weights: list[float] = []
-    counts: list[int] = []
-    for value, weight in zip(values.tolist(), weights.tolist(), strict=True):
-        levels.append(value)
-        level_weights.append(weight)
-        counts.append(1)
-        # Merge backwards while the newest block sits below its predecessor.
-        while len(levels) > 1 and levels[-2] > levels[-1]:
-            merged_weight = level_weights[-2] + level_weights[-1]
-            levels[-2] = (levels[-2] * level_weights[-2] + levels[-1] * level_weights[-1]) / (
-                merged_weight
-            )
-            level_weights[-2] = merged_weight
-            counts[-2] += counts[-1]
-            del levels[-1], level_weights[-1], counts[-1]
-    return np.repeat(np.array(levels, dtype=np.float64), counts)
+    fitted = isotonic_regression(values, sample_weight=weights, increasing=True)
+    return np.asarray(fitted, dtype=np.float64)
 
 
 @dataclass(frozen=True)
