@@ -36,10 +36,29 @@ import sys
 import threading
 import time
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Final
+from typing import Any, Final
 
-from catheter_control.tip_tf import URDF_PACKAGE_URL, TipTf, chain, urdf_text
+import foxglove
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.experimental.events_executor import EventsExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message, serialize_message
+from rclpy.utilities import remove_ros_args
+
+from catheter_control.tip_tf import (
+    BASE_FRAME,
+    DISTAL_FRAME,
+    TIP_FRAME,
+    URDF_PACKAGE_URL,
+    TipTf,
+    chain,
+    urdf_text,
+)
 from catheter_driver import diagnostics
+from catheter_driver.messages import angle_rad_from, joint_state, message_class
+from catheter_models.bag_messages import kilted_typestore
 from catheter_models.contract import (
     ANGLE_DESIRED,
     DEFAULT_NAMESPACE,
@@ -54,9 +73,6 @@ from catheter_models.contract import (
 )
 from catheter_models.errors import ParameterError
 from catheter_models.gaps import StreamGaps, header_stamp_ns, pauses_between_runs
-
-if TYPE_CHECKING:
-    import foxglove
 
 DEFAULT_PORT: Final = 8765
 """Foxglove's default WebSocket port, which its "Open connection" dialog suggests."""
@@ -109,18 +125,12 @@ class TopicStats:
 
 def _schema(msgtype: str) -> foxglove.Schema:
     """The ROS 2 message definition of ``msgtype`` as a Foxglove schema (as our bags carry it)."""
-    import foxglove
-
-    from catheter_models.bag_messages import kilted_typestore
-
     text, _ = kilted_typestore().generate_msgdef(msgtype, ros_version=2)
     return foxglove.Schema(name=msgtype, encoding="ros2msg", data=text.encode("utf-8"))
 
 
 def _cdr(msgtype: str, msg: Any) -> bytes:
     """Serialise a rosbags message object to CDR (for types without an rclpy wheel here)."""
-    from catheter_models.bag_messages import kilted_typestore
-
     return bytes(kilted_typestore().serialize_cdr(msg, msgtype))
 
 
@@ -163,11 +173,6 @@ class LiveView:
         Raises:
             ParameterError: the port cannot be bound (in use, or not allowed).
         """
-        import foxglove
-        import rclpy
-        from rclpy.experimental.events_executor import EventsExecutor
-        from rclpy.node import Node
-
         try:
             self._server = foxglove.start_server(
                 name="catheter",
@@ -244,7 +249,6 @@ class LiveView:
 
     # -- intake (executor thread) ------------------------------------------------------------
     def _spin(self) -> None:
-        from rclpy.executors import ExternalShutdownException
 
         # spin_once with a timeout, not spin(): the EventsExecutor's shutdown() does not stop
         # a spin() in another thread (seen: stop() hung there).
@@ -253,10 +257,6 @@ class LiveView:
                 self._executor.spin_once(timeout_sec=0.1)
 
     def _forward(self, spec: TopicSpec) -> None:
-        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-        from rclpy.serialization import deserialize_message
-
-        from catheter_driver.messages import angle_rad_from, message_class
 
         topic = qualify(spec, self.namespace)
         channel = self._channels[topic]
@@ -293,10 +293,6 @@ class LiveView:
         self._node.create_subscription(cls, spec.name, on_message, profile, raw=True)
 
     def _log_tf(self, stamp_ns: int, angle_rad: float) -> None:
-        from rclpy.serialization import serialize_message
-
-        from catheter_control.tip_tf import BASE_FRAME, DISTAL_FRAME
-        from catheter_driver.messages import joint_state
 
         now_ns = time.time_ns()
         self._channels[qualify(_JOINT_STATES, self.namespace)].log(
@@ -308,7 +304,6 @@ class LiveView:
 
     @staticmethod
     def _tf_cdr(stamp_ns: int, angle_rad: float, parent: str, child: str) -> bytes:
-        from catheter_models.bag_messages import kilted_typestore
 
         types = kilted_typestore().types
         time_t = types["builtin_interfaces/msg/Time"]
@@ -328,8 +323,6 @@ class LiveView:
 
     # -- latched data and assets -------------------------------------------------------------
     def _repeat(self) -> None:
-        from catheter_control.tip_tf import DISTAL_FRAME, TIP_FRAME
-        from catheter_models.bag_messages import kilted_typestore
 
         description = _cdr(
             _ROBOT_DESCRIPTION.msgtype,
@@ -409,8 +402,6 @@ _START_TIMEOUT_S: Final = 30.0
 
 def main(argv: list[str] | None = None) -> int:
     """``live_view``: serve the running graph to Foxglove until Ctrl-C (or its parent exits)."""
-    from rclpy.utilities import remove_ros_args
-
     parser = argparse.ArgumentParser(
         prog="live_view", description="Stream the running catheter graph to Foxglove."
     )
