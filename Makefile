@@ -8,7 +8,7 @@ PRESET ?= traj_descending_sine
 .PHONY: setup setup-runtime lock test-distro demo test test-loaded test-fast test-slow lint typecheck bench bench-models soak soak-loaded faults lab-example figures \
 	sample-bags shipped-models colcon clean
 
-INSTALL_DEPS := scripts/setup_env.sh src/catheter_models/setup.py src/catheter_driver/setup.py \
+INSTALL_DEPS := scripts/setup_env.sh src/catheter_models/setup.py src/catheter_ros/setup.py src/catheter_driver/setup.py \
 	src/catheter_control/setup.py scripts/build_interfaces.sh $(shell find ros2_ws/interfaces -type f)
 
 ## Everything, from requirements-lock.txt (hashes checked): runtime, training extra, tests.

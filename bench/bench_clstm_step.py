@@ -52,7 +52,6 @@ from onnx import numpy_helper
 from tqdm import tqdm
 
 from catheter_control.models import shipped_model_dir
-from catheter_driver.rt_loop import DEFAULT_RT_PRIORITY, set_realtime
 from catheter_models.models import load_model
 from catheter_models.models.base import MinMaxScaler, Stream
 from catheter_models.models.lstm import (
@@ -68,6 +67,7 @@ from catheter_models.models.lstm import (
 from catheter_models.models.lstm_train import StreamingNet, WindowedNet, export_onnx
 from catheter_models.onnx_runtime import ort
 from catheter_models.signals import get_preset
+from catheter_ros.rt_loop import DEFAULT_RT_PRIORITY, set_realtime
 
 RESULTS_DIR = Path(__file__).resolve().parent / "results"
 RESULTS = RESULTS_DIR / "clstm_step.json"

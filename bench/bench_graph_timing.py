@@ -16,7 +16,7 @@ once per control rate, and reads back what the nodes themselves measured on /dia
 The baselines are the thesis's 250 Hz loop, the 1 kHz graph with its loops at normal
 scheduling (``--rt-priority 0``: what a node falls back to where the OS refuses SCHED_FIFO),
 and the 1 kHz graph with start-up's objects left to the garbage collector
-(``CATHETER_GC_FREEZE=0``; see ``catheter_driver.node_main``).
+(``CATHETER_GC_FREEZE=0``; see ``catheter_ros.node_main``).
 The 1 kHz row is the same graph four times as fast
 (the 250 Hz c-LSTM stepped at its own rate, interpolated between samples; see
 ``catheter_control.control_core``).
@@ -157,7 +157,7 @@ def bag_losses(bag: Path) -> dict[str, dict[str, int]]:
     by the stamps read back with the ``mcap`` reader (not the recorder's code path)."""
     from mcap.reader import make_reader
 
-    from catheter_models.bag_metadata import bag_custom_data, locate_bag
+    from catheter_models.bag.metadata import bag_custom_data, locate_bag
     from catheter_models.gaps import StreamGaps, header_stamp_ns, pauses_between_runs
 
     layout = locate_bag(bag)

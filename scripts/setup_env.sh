@@ -37,6 +37,10 @@ if [ ! -x "$venv/bin/python" ]; then
   "$python" -m venv "$venv"
 fi
 pip=("$venv/bin/python" -m pip --disable-pip-version-check -q)
+# pip 23.2 (what a Python 3.11 venv starts with) refuses the lock under --require-hashes: it
+# takes a dependency's extra (pytest-cov's `coverage[toml]`) for an unpinned requirement and
+# fetches the newest coverage. 25.3 resolves the extra against the pinned coverage.
+"${pip[@]}" install "pip==25.3"
 
 index_args=()
 torch_index="${TORCH_INDEX_URL-https://download.pytorch.org/whl/cpu}"
@@ -63,9 +67,9 @@ fi
 echo "setup: installing $(basename "$lock") (hashes checked)"
 "${pip[@]}" install --require-hashes "${index_args[@]}" -r "$lock"
 "$here/scripts/build_interfaces.sh" "$venv"  # control_msgs, tf2_msgs: no wheel has them
-echo "setup: installing catheter_models, catheter_driver, catheter_control"
-"${pip[@]}" install --no-deps -e "$here/src/catheter_models" -e "$here/src/catheter_driver" \
-  -e "$here/src/catheter_control"
+echo "setup: installing catheter_models, catheter_ros, catheter_driver, catheter_control"
+"${pip[@]}" install --no-deps -e "$here/src/catheter_models" -e "$here/src/catheter_ros" \
+  -e "$here/src/catheter_driver" -e "$here/src/catheter_control"
 touch "$marker"
 # The full install holds the runtime one: `make demo` after `make setup` installs nothing.
 [ "$flavour" = runtime ] || touch "$venv/.installed-runtime"

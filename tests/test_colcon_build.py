@@ -21,7 +21,7 @@ import pytest
 pytestmark = pytest.mark.slow
 
 REPO = Path(__file__).resolve().parents[1]
-PACKAGES = ("catheter_models", "catheter_driver", "catheter_control")
+PACKAGES = ("catheter_models", "catheter_ros", "catheter_driver", "catheter_control")
 VENV_BIN = Path(sys.executable).parent
 IGNORE = shutil.ignore_patterns("__pycache__", "*.egg-info", "build", "install", "log")
 

@@ -33,7 +33,7 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-PACKAGES = ("catheter_models", "catheter_driver", "catheter_control")
+PACKAGES = ("catheter_models", "catheter_ros", "catheter_driver", "catheter_control")
 DOCKERFILE = REPO / "docker" / "Dockerfile"
 CONSTRAINTS = REPO / "docker" / "constraints.txt"
 
@@ -202,9 +202,36 @@ def test_every_import_has_an_exec_depend(pkg: str) -> None:
     assert not problems, f"{pkg}: {len(problems)} import(s) not covered:\n" + "\n".join(problems)
 
 
+LAYERS: dict[str, frozenset[str]] = {
+    "catheter_models": frozenset(),
+    "catheter_ros": frozenset({"catheter_models"}),
+    "catheter_driver": frozenset({"catheter_models", "catheter_ros"}),
+    "catheter_control": frozenset({"catheter_models", "catheter_ros"}),
+}
+"""Which workspace packages each may import. The driver and control sides never import each
+other: they meet at the topic contract (``catheter_models.contract``), over DDS."""
+
+LAUNCHES: dict[str, frozenset[str]] = {"catheter_control": frozenset({"catheter_driver"})}
+"""Run-time dependencies without an import: ``bringup`` and the launch files start the driver
+package's nodes as processes, by executable or module name."""
+
+
+@pytest.mark.parametrize("pkg", PACKAGES)
+def test_packages_import_only_down_their_layers(pkg: str) -> None:
+    problems = [
+        f"{imp.path.relative_to(REPO)}:{imp.line}: imports {imp.root}"
+        for imp in package_imports(pkg)
+        if imp.root in PACKAGES and imp.root != pkg and imp.root not in LAYERS[pkg]
+    ]
+    assert not problems, (
+        f"{pkg} may import only {sorted(LAYERS[pkg]) or 'no workspace package'}:\n"
+        + "\n".join(problems)
+    )
+
+
 @pytest.mark.parametrize("pkg", PACKAGES)
 def test_no_stale_or_unknown_exec_depend(pkg: str) -> None:
-    used = set()
+    used = set(LAUNCHES.get(pkg, ()))
     for imp in package_imports(pkg):
         if imp.root in PACKAGES:
             used.add(imp.root)

@@ -6,8 +6,8 @@ import pytest
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import FluidPressure, JointState, Range
 
-from catheter_driver import messages
 from catheter_models.gaps import header_stamp_ns
+from catheter_ros import messages
 
 pytestmark = pytest.mark.filterwarnings("ignore:module .sre_:DeprecationWarning")
 

@@ -30,9 +30,9 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from catheter_control.trajectory import TrajectoryLimits, TrajectoryPlan
 from catheter_control.trajectory_action import RunProgress, TrajectoryActionServer
-from catheter_driver import messages
 from catheter_models.contract import BEND_JOINT, TIP_ANGLE
 from catheter_models.errors import CatheterError
+from catheter_ros import messages
 
 pytestmark = pytest.mark.filterwarnings("ignore:module 'sre_:DeprecationWarning")
 

@@ -18,10 +18,10 @@ from trajectory_msgs.msg import JointTrajectory
 
 from catheter_control.compensator_node import CompensatorNode
 from catheter_driver.laser_angle_node import LaserAngleNode
-from catheter_driver.params import refuse_undeclared_overrides
 from catheter_driver.sim_hardware_node import SimHardwareNode
 from catheter_driver.valve_driver_node import ValveDriverNode
 from catheter_models.errors import ParameterError
+from catheter_ros.params import refuse_undeclared_overrides
 
 
 @contextmanager

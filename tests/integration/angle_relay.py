@@ -18,10 +18,10 @@ import signal
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-from catheter_driver.node_main import run_node
-from catheter_driver.qos import RECORD, STREAM
-from catheter_driver.rt_loop import set_process_realtime
 from catheter_models.contract import TIP_ANGLE
+from catheter_ros.node_main import run_node
+from catheter_ros.qos import RECORD, STREAM
+from catheter_ros.rt_loop import set_process_realtime
 
 RAW_ANGLE = "tip/angle_raw"
 RT_PRIORITY = 40

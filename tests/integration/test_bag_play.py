@@ -13,8 +13,8 @@ from graph_utils import Children, Probe, recorder_values, wait_for_recorder
 from rosbags.highlevel import AnyReader
 
 from catheter_control.bringup import sim_graph_specs
-from catheter_models.bag_messages import kilted_typestore
-from catheter_models.bag_metadata import bag_custom_data, locate_bag
+from catheter_models.bag.messages import kilted_typestore
+from catheter_models.bag.metadata import bag_custom_data, locate_bag
 from catheter_models.contract import DIAGNOSTICS, SENSOR_STREAMS, qualify
 
 pytestmark = [

@@ -33,9 +33,7 @@ from test_compensator import (
 )
 from trajectory_msgs.msg import JointTrajectory
 
-from catheter_control import qos
 from catheter_control.models import SHIPPED_GAINS, shipped_model_dir
-from catheter_control.qos import RECORD
 from catheter_models.contract import (
     ANGLE_DESIRED,
     DIAGNOSTICS,
@@ -45,6 +43,8 @@ from catheter_models.contract import (
     TRAJECTORY,
 )
 from catheter_models.feedback import GAINS_FILE, FeedbackGains
+from catheter_ros import qos
+from catheter_ros.qos import RECORD
 
 pytestmark = [
     pytest.mark.slow,

@@ -31,8 +31,6 @@ from graph_utils import (
 from sensor_msgs.msg import FluidPressure, JointState
 from trajectory_msgs.msg import JointTrajectory
 
-from catheter_control import qos
-from catheter_control.qos import RECORD
 from catheter_models.contract import (
     ANGLE_DESIRED,
     DEFAULT_NAMESPACE,
@@ -42,6 +40,8 @@ from catheter_models.contract import (
     TIP_ANGLE,
     TRAJECTORY,
 )
+from catheter_ros import qos
+from catheter_ros.qos import RECORD
 
 pytestmark = [
     pytest.mark.slow,

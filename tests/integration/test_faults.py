@@ -48,10 +48,7 @@ from graph_utils import (
 from sensor_msgs.msg import FluidPressure
 from trajectory_msgs.msg import JointTrajectory
 
-from catheter_control import qos
 from catheter_control.bringup import ProcessGraph, sim_graph_specs
-from catheter_control.qos import RECORD, STREAM
-from catheter_driver import messages
 from catheter_models.bag import load_bag
 from catheter_models.contract import (
     DIAGNOSTICS,
@@ -61,6 +58,8 @@ from catheter_models.contract import (
     TRAJECTORY,
     qualify,
 )
+from catheter_ros import messages, qos
+from catheter_ros.qos import RECORD, STREAM
 
 pytestmark = [
     pytest.mark.slow,

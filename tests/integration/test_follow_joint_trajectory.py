@@ -24,10 +24,10 @@ from rclpy.action.client import ActionClient
 from sensor_msgs.msg import FluidPressure
 from trajectory_msgs.msg import JointTrajectory
 
-from catheter_control import qos
 from catheter_control.bringup import sim_graph_specs
 from catheter_control.trajectory_action import ACTION_NAME
 from catheter_models.contract import BEND_JOINT, PRESSURE_COMMAND, TRAJECTORY
+from catheter_ros import qos
 
 pytestmark = [
     pytest.mark.slow,

@@ -28,10 +28,7 @@ from rosbags.highlevel import AnyReader
 from sensor_msgs.msg import FluidPressure, JointState
 from trajectory_msgs.msg import JointTrajectory
 
-from catheter_control import qos
 from catheter_control.bringup import sim_graph_specs
-from catheter_control.qos import RECORD, STREAM
-from catheter_driver import messages
 from catheter_models.bag import load_bag
 from catheter_models.contract import (
     ANGLE_DESIRED,
@@ -44,6 +41,8 @@ from catheter_models.contract import (
     qualify,
 )
 from catheter_models.units import AMBIENT_PRESSURE_PA
+from catheter_ros import messages, qos
+from catheter_ros.qos import RECORD, STREAM
 
 pytestmark = [
     pytest.mark.slow,

@@ -39,9 +39,6 @@ from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import FluidPressure, JointState
 
 from catheter_control.bringup import NodeSpec, driver_specs, sim_graph_specs
-from catheter_control.qos import RECORD, STREAM
-from catheter_driver import messages
-from catheter_driver.laser_core import Calibration
 from catheter_models.bag import BagData, StampedSeries, load_bag
 from catheter_models.contract import (
     DIAGNOSTICS,
@@ -51,8 +48,11 @@ from catheter_models.contract import (
     TIP_DISTANCE,
     qualify,
 )
+from catheter_models.geometry import Calibration
 from catheter_models.plant import PlantConfig
 from catheter_models.signals import get_preset
+from catheter_ros import messages
+from catheter_ros.qos import RECORD, STREAM
 
 pytestmark = [
     pytest.mark.slow,

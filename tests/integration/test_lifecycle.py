@@ -13,9 +13,9 @@ from diagnostic_msgs.msg import DiagnosticArray
 from graph_utils import Children, Probe, diagnostic_values, gauge_pa, statuses, trajectory_msg
 from sensor_msgs.msg import JointState
 
-from catheter_control import qos
 from catheter_control.bringup import sim_graph_specs
-from catheter_control.lifecycle_client import LifecycleError
+from catheter_ros import qos
+from catheter_ros.lifecycle_client import LifecycleError
 
 pytestmark = pytest.mark.slow
 

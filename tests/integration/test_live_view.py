@@ -163,8 +163,8 @@ def test_tip_tf_publishes_the_model_and_its_transforms(children: Children) -> No
     from std_msgs.msg import String
     from tf2_msgs.msg import TFMessage
 
-    from catheter_control import qos
-    from catheter_driver.messages import joint_state
+    from catheter_ros import qos
+    from catheter_ros.messages import joint_state
 
     latched = QoSProfile(
         depth=1,

@@ -33,7 +33,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from catheter_models.bag_playback import Player
+from catheter_models.bag.playback import Player
 from catheter_models.contract import PRESSURE_COMMAND, TRAJECTORY
 from catheter_models.errors import CatheterError, ParameterError
 
@@ -124,8 +124,8 @@ def main(argv: list[str] | None = None) -> int:
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
-    from catheter_driver.messages import message_class
-    from catheter_driver.node_main import install_stop_handlers
+    from catheter_ros.messages import message_class
+    from catheter_ros.node_main import install_stop_handlers
 
     argv = sys.argv if argv is None else ["bag_play", *argv]
     try:

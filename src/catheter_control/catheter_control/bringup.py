@@ -6,7 +6,7 @@ composed in one process with ``--compose`` (one executor, less start-up cost). T
 
 The rig and the compensator are lifecycle nodes: once their processes are up, ``bringup``
 configures each, then activates each, in start order, through their ``change_state``
-services (catheter_control.lifecycle_client); a failed transition stops the graph and is
+services (catheter_ros.lifecycle_client); a failed transition stops the graph and is
 reported with the node's name and its reason.
 
 Shutdown order matters for safety and for the record: the compensator is deactivated first
@@ -39,7 +39,7 @@ from catheter_models.errors import CatheterError
 if TYPE_CHECKING:
     from rclpy.node import Node
 
-    from catheter_control.lifecycle_client import ManagerContext
+    from catheter_ros.lifecycle_client import ManagerContext
 
 Params = Mapping[str, object]
 
@@ -284,7 +284,7 @@ class ProcessGraph:
 
     def activate(self) -> None:
         """Configure, then activate, every lifecycle node through its services."""
-        from catheter_control.lifecycle_client import ManagerContext
+        from catheter_ros.lifecycle_client import ManagerContext
 
         managed = [s.full_name(self.namespace) for s in self.specs if s.lifecycle]
         if not managed:
@@ -300,7 +300,7 @@ class ProcessGraph:
 
     def spawn(self) -> None:
         """Start every node's process (lifecycle nodes then wait, unconfigured)."""
-        from catheter_driver.node_main import PARENT_PID_ENV  # imports rclpy: only when used
+        from catheter_ros.node_main import PARENT_PID_ENV  # imports rclpy: only when used
 
         for spec in self.specs:
             out = None
@@ -384,8 +384,8 @@ def run_composed(specs: Sequence[NodeSpec], namespace: str, ros_args: Sequence[s
 
     import yaml
 
-    from catheter_control.lifecycle_client import LifecycleManager
-    from catheter_driver.node_main import run_nodes
+    from catheter_ros.lifecycle_client import LifecycleManager
+    from catheter_ros.node_main import run_nodes
 
     # Per-node parameters in one process need a params file keyed by the node's full name.
     ns = namespace.rstrip("/")

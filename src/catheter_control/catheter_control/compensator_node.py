@@ -29,7 +29,6 @@ from sensor_msgs.msg import FluidPressure, JointState
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
-from catheter_control import qos
 from catheter_control.control_core import ControlCore, SensorWatch
 from catheter_control.models import (
     COMPENSATORS,
@@ -40,11 +39,6 @@ from catheter_control.models import (
 )
 from catheter_control.trajectory import TrajectoryLimits, TrajectoryPlan
 from catheter_control.trajectory_action import RunProgress, TrajectoryActionServer
-from catheter_driver import diagnostics, messages
-from catheter_driver.loop_node import LifecycleLoopNode
-from catheter_driver.node_main import run_node
-from catheter_driver.params import declare_float, declare_plain
-from catheter_driver.polled import PolledTopics
 from catheter_models.contract import (
     ANGLE_DESIRED,
     BEND_JOINT,
@@ -56,6 +50,11 @@ from catheter_models.contract import (
 from catheter_models.errors import CatheterError, ParameterError
 from catheter_models.plant.config import ParamSpec
 from catheter_models.units import AMBIENT_PRESSURE_PA, deg_to_rad
+from catheter_ros import diagnostics, messages, qos
+from catheter_ros.loop_node import LifecycleLoopNode
+from catheter_ros.node_main import run_node
+from catheter_ros.params import declare_float, declare_plain
+from catheter_ros.polled import PolledTopics
 
 _RATE = ParamSpec("control_rate_hz", 250.0, 10.0, 2000.0, "control loop rate [Hz]")
 _PMIN = ParamSpec("min_pressure_pa", 0.0, 0.0, 6.0e5, "lowest command, gauge [Pa]")
@@ -214,7 +213,7 @@ class CompensatorNode(LifecycleLoopNode):
                 "accept_trajectories is false: trajectory is not subscribed, the catheter "
                 "stays at rest"
             )
-        # Polled by the loop, not dispatched by the executor: see catheter_driver.polled.
+        # Polled by the loop, not dispatched by the executor: see catheter_ros.polled.
         self._sensors = PolledTopics(
             self,
             {

@@ -15,11 +15,6 @@ import numpy as np
 import rclpy
 from sensor_msgs.msg import FluidPressure
 
-from catheter_control import qos
-from catheter_driver import diagnostics, messages
-from catheter_driver.loop_node import LoopNode
-from catheter_driver.node_main import run_node
-from catheter_driver.params import declare_float, declare_int, declare_plain
 from catheter_models.contract import PRESSURE_COMMAND
 from catheter_models.errors import SignalError
 from catheter_models.lab.signals import lab_spec
@@ -31,6 +26,10 @@ from catheter_models.signals import (
     training_set,
 )
 from catheter_models.units import AMBIENT_PRESSURE_PA
+from catheter_ros import diagnostics, messages, qos
+from catheter_ros.loop_node import LoopNode
+from catheter_ros.node_main import run_node
+from catheter_ros.params import declare_float, declare_int, declare_plain
 
 _RATE = ParamSpec("rate_hz", 250.0, 10.0, 2000.0, "command rate [Hz]")
 _PMAX = ParamSpec("max_pressure_pa", 3.0e5, 0.0, 6.0e5, "refuse signals above this, gauge [Pa]")

@@ -37,10 +37,10 @@ from catheter_control.trajectory import (
     preset_knots,
     with_lead_in,
 )
-from catheter_driver.laser_core import Calibration
 from catheter_models.contract import ANGLE_DESIRED, DEFAULT_NAMESPACE, TIP_ANGLE
 from catheter_models.errors import CatheterError, ParameterError
 from catheter_models.gaps import find_gaps, say_gaps
+from catheter_models.geometry import Calibration
 from catheter_models.signals import TEST_TRAJECTORIES, get_preset
 
 _PLANT_STRAIGHT_DISTANCE_M = 0.065
@@ -308,7 +308,6 @@ def _run(
     from tqdm import tqdm
     from trajectory_msgs.msg import JointTrajectoryPoint
 
-    from catheter_control import qos
     from catheter_control.bringup import ProcessGraph
     from catheter_control.tracking_report import (
         TrackingError,
@@ -319,7 +318,6 @@ def _run(
         timing_text,
     )
     from catheter_control.trajectory_action import ACTION_NAME
-    from catheter_driver.messages import angle_rad_from, ns_from_time
     from catheter_models.contract import (
         ANGLE_DESIRED,
         BEND_JOINT,
@@ -328,6 +326,8 @@ def _run(
         PRESSURE_MEASURED,
         TIP_ANGLE,
     )
+    from catheter_ros import qos
+    from catheter_ros.messages import angle_rad_from, ns_from_time
 
     data = _Collected()
     with rclpy.init(

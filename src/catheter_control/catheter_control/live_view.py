@@ -56,9 +56,7 @@ from catheter_control.tip_tf import (
     chain,
     urdf_text,
 )
-from catheter_driver import diagnostics
-from catheter_driver.messages import angle_rad_from, joint_state, message_class
-from catheter_models.bag_messages import kilted_typestore
+from catheter_models.bag.messages import kilted_typestore
 from catheter_models.contract import (
     ANGLE_DESIRED,
     DEFAULT_NAMESPACE,
@@ -73,6 +71,8 @@ from catheter_models.contract import (
 )
 from catheter_models.errors import ParameterError
 from catheter_models.gaps import StreamGaps, header_stamp_ns, pauses_between_runs
+from catheter_ros import diagnostics
+from catheter_ros.messages import angle_rad_from, joint_state, message_class
 
 DEFAULT_PORT: Final = 8765
 """Foxglove's default WebSocket port, which its "Open connection" dialog suggests."""

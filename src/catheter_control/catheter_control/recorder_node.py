@@ -32,17 +32,16 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.subscription import Subscription
 
-from catheter_control import qos
-from catheter_driver import diagnostics
-from catheter_driver.messages import message_class
-from catheter_driver.node_main import run_node
-from catheter_driver.params import declare_plain
-from catheter_driver.rt_loop import set_process_realtime
 from catheter_models import __version__
 from catheter_models.bag import LATCHED_QOS, STREAM_QOS, BagRecorder
 from catheter_models.contract import RECORDED_TOPICS, TRAJECTORY, TopicSpec
 from catheter_models.errors import ParameterError
 from catheter_models.gaps import StreamGaps, header_stamp_ns, pauses_between_runs
+from catheter_ros import diagnostics, qos
+from catheter_ros.messages import message_class
+from catheter_ros.node_main import run_node
+from catheter_ros.params import declare_plain
+from catheter_ros.rt_loop import set_process_realtime
 
 RECORDER_RT_PRIORITY = 0
 """Normal scheduling by default: since the drivers take commands in their loop, the recorder at

@@ -28,11 +28,11 @@ from typing import Any, Final
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-from catheter_control import qos
-from catheter_driver.messages import angle_rad_from, ns_from_time
-from catheter_driver.node_main import run_node
 from catheter_models.contract import BEND_JOINT, TIP_ANGLE
 from catheter_models.errors import ParameterError
+from catheter_ros import qos
+from catheter_ros.messages import angle_rad_from, ns_from_time
+from catheter_ros.node_main import run_node
 
 URDF_RESOURCE: Final = "urdf/catheter.urdf"
 """The model inside the ``catheter_control`` package (also installed to ``share/``)."""

@@ -57,12 +57,11 @@ from rclpy.task import Future
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from catheter_control import qos
 from catheter_control.trajectory import TrajectoryPlan
-from catheter_driver import messages
-from catheter_driver.polled import PolledTopics
 from catheter_models.contract import BEND_JOINT, TIP_ANGLE, TRAJECTORY
 from catheter_models.units import rad_to_deg
+from catheter_ros import messages, qos
+from catheter_ros.polled import PolledTopics
 
 ACTION_NAME = "follow_joint_trajectory"
 """In the graph's namespace, beside the ``trajectory`` topic."""
@@ -181,7 +180,7 @@ class TrajectoryActionServer:
         self._goals: list[_Goal] = []
         self._tip: tuple[float, float] | None = None  # (received at [s], bend [rad])
         # Taken at the feedback rate, not dispatched 250 times a second by the executor that
-        # the compensator's control thread shares the GIL with (see catheter_driver.polled);
+        # the compensator's control thread shares the GIL with (see catheter_ros.polled);
         # only the newest sample matters, so only it is kept.
         self._tips = PolledTopics(
             node, {TIP_ANGLE.name: JointState}, _NEWEST_SAMPLE, raw=False, suffix="_action"

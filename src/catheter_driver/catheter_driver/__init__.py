@@ -1,3 +1,3 @@
-"""Hardware side of the PAM catheter: the simulated hardware node (and, later, real drivers)."""
+"""Hardware side of the PAM catheter: device drivers, their emulators, the simulated rig node."""
 
 __version__ = "0.1.0"

@@ -22,23 +22,23 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import FluidPressure, JointState, Range
 from std_srvs.srv import Trigger
 
-from catheter_driver import diagnostics, messages, qos
 from catheter_driver.devices.factory import make_laser_adc
-from catheter_driver.laser_core import Calibration, LaserAngleCore, ZeroingError
-from catheter_driver.lifecycle_util import (
+from catheter_driver.laser_core import LaserAngleCore, ZeroingError
+from catheter_models.contract import PRESSURE_MEASURED, TIP_ANGLE, TIP_DISTANCE
+from catheter_models.errors import CatheterError
+from catheter_models.geometry import Calibration, LaserGeometry
+from catheter_models.plant.config import ParamSpec
+from catheter_models.units import AMBIENT_PRESSURE_PA
+from catheter_ros import diagnostics, messages, qos
+from catheter_ros.lifecycle_node import (
     declare_autostart,
     declare_device_options,
     device_options,
 )
-from catheter_driver.loop_node import declare_rt_priority, make_process_realtime
-from catheter_driver.node_main import run_node
-from catheter_driver.params import declare_float, declare_plain
-from catheter_driver.rt_loop import DeadlineLoop, MonotonicStamper
-from catheter_models.contract import PRESSURE_MEASURED, TIP_ANGLE, TIP_DISTANCE
-from catheter_models.errors import CatheterError
-from catheter_models.geometry import LaserGeometry
-from catheter_models.plant.config import ParamSpec
-from catheter_models.units import AMBIENT_PRESSURE_PA
+from catheter_ros.loop_node import declare_rt_priority, make_process_realtime
+from catheter_ros.node_main import run_node
+from catheter_ros.params import declare_float, declare_plain
+from catheter_ros.rt_loop import DeadlineLoop, MonotonicStamper
 
 _RATE = ParamSpec("rate_hz", 250.0, 10.0, 5000.0, "the ADC bridge's sample rate [Hz]")
 _M = ParamSpec("laser.m_per_v", 4.05e-3, 1e-4, 0.1, "eq. 3.1 slope m [m/V]")

@@ -7,18 +7,15 @@ running maximum of the data (which would move whenever the tip does, e.g. with d
 
 from __future__ import annotations
 
-import json
-import math
 import time
 from collections import deque
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from catheter_driver.devices.base import LaserAdc, LaserSample
 from catheter_models.errors import CatheterError
-from catheter_models.geometry import LaserGeometry
+from catheter_models.geometry import Calibration, LaserGeometry
 
 SEQ_MODULUS = 1 << 16
 """The bridge's sample counter is 16 bits and wraps."""
@@ -74,43 +71,6 @@ class LaserReading:
     sample_s: float
     distance_m: float
     angle_rad: float | None
-
-
-@dataclass(frozen=True)
-class Calibration:
-    """The stored straight-tip reference of eq. 3.2."""
-
-    straight_distance_m: float
-    std_m: float
-    samples: int
-    zeroed_at: str
-
-    def save(self, path: Path) -> None:
-        """Write atomically (a crash mid-write must not leave a half file)."""
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(path.suffix + ".tmp")
-        tmp.write_text(json.dumps(self.__dict__, indent=2) + "\n")
-        tmp.replace(path)
-
-    @classmethod
-    def load(cls, path: Path) -> Calibration:
-        """Read a calibration file; CatheterError names what is wrong with it."""
-        try:
-            raw = json.loads(path.read_text())
-            cal = cls(
-                straight_distance_m=float(raw["straight_distance_m"]),
-                std_m=float(raw["std_m"]),
-                samples=int(raw["samples"]),
-                zeroed_at=str(raw["zeroed_at"]),
-            )
-        except (OSError, ValueError, KeyError, TypeError) as exc:
-            raise CatheterError(f"laser calibration {path} is unreadable: {exc}") from None
-        if not (math.isfinite(cal.straight_distance_m) and cal.straight_distance_m > 0):
-            raise CatheterError(
-                f"laser calibration {path}: straight_distance_m {cal.straight_distance_m} "
-                "is not a positive distance"
-            )
-        return cal
 
 
 class LaserAngleCore:

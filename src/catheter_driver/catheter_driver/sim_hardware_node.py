@@ -19,16 +19,16 @@ import time
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import FluidPressure, JointState, Range
 
-from catheter_driver import diagnostics, messages, qos
-from catheter_driver.loop_node import LifecycleLoopNode
-from catheter_driver.node_main import run_node
-from catheter_driver.params import declare_float, declare_int, declare_plain
-from catheter_driver.polled import PressureCommands
-from catheter_driver.rt_loop import LatencyWindow
 from catheter_driver.sim_hardware import SimHardware
 from catheter_models.contract import PRESSURE_MEASURED, TIP_ANGLE, TIP_DISTANCE
 from catheter_models.errors import CatheterError
 from catheter_models.plant.config import EFFECTS, RIG_PARAMS, ParamSpec, PlantConfig
+from catheter_ros import diagnostics, messages, qos
+from catheter_ros.loop_node import LifecycleLoopNode
+from catheter_ros.node_main import run_node
+from catheter_ros.params import declare_float, declare_int, declare_plain
+from catheter_ros.polled import PressureCommands
+from catheter_ros.rt_loop import LatencyWindow
 
 _MAX_PRESSURE = ParamSpec(
     "max_pressure_pa", 3.0e5, 0.0, 6.0e5, "safety limit: commands above clamp here, gauge [Pa]"

@@ -21,23 +21,23 @@ from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackRet
 from sensor_msgs.msg import FluidPressure
 from std_srvs.srv import SetBool, Trigger
 
-from catheter_driver import diagnostics, messages, qos
 from catheter_driver.devices.factory import make_transmitter, make_valve
-from catheter_driver.lifecycle_util import (
-    declare_autostart,
-    declare_device_options,
-    device_options,
-)
-from catheter_driver.loop_node import declare_rt_priority, make_process_realtime
-from catheter_driver.node_main import run_node
-from catheter_driver.params import declare_float, declare_plain
-from catheter_driver.polled import PressureCommands
-from catheter_driver.rt_loop import DeadlineLoop, LatencyWindow, MonotonicStamper
 from catheter_driver.valve_core import ValveDriverCore
 from catheter_models.contract import PRESSURE_MEASURED
 from catheter_models.errors import CatheterError
 from catheter_models.plant.config import ParamSpec
 from catheter_models.units import AMBIENT_PRESSURE_PA
+from catheter_ros import diagnostics, messages, qos
+from catheter_ros.lifecycle_node import (
+    declare_autostart,
+    declare_device_options,
+    device_options,
+)
+from catheter_ros.loop_node import declare_rt_priority, make_process_realtime
+from catheter_ros.node_main import run_node
+from catheter_ros.params import declare_float, declare_plain
+from catheter_ros.polled import PressureCommands
+from catheter_ros.rt_loop import DeadlineLoop, LatencyWindow, MonotonicStamper
 
 _RATE = ParamSpec("rate_hz", 250.0, 10.0, 2000.0, "control loop and transmitter poll rate [Hz]")
 _PMIN = ParamSpec("min_pressure_pa", 0.0, 0.0, 6.0e5, "lowest set-point, gauge [Pa]")

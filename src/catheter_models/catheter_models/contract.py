@@ -15,6 +15,17 @@ BEND_JOINT: Final = "bend"
 SENSOR_RATE_HZ: Final = 250.0
 """Laser (Baumer OADM) and pressure transmitter sampling rate of the thesis's rig."""
 CONTROL_RATE_HZ: Final = 250.0
+"""The compensator's and the valve driver's tick rate: one command per sensor sample."""
+
+MAX_PRESSURE_PA: Final = 3.0e5
+"""The safety ceiling on the muscle's gauge pressure (3 bar, the thesis's regulator span).
+
+Every layer that can move the catheter clamps or refuses above its own ``max_pressure_pa``
+parameter, and every such parameter defaults to this one value."""
+
+PRESSURE_LIMIT_HARD_PA: Final = 6.0e5
+"""The highest value any ``max_pressure_pa`` parameter accepts (6 bar): beyond it a typo, not a
+choice. The muscle's rated pressure on the thesis's rig."""
 
 
 class TopicSpec(NamedTuple):

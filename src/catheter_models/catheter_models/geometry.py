@@ -22,14 +22,16 @@ Every function accepts a float or a numpy array and returns the same kind.
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Final
 
 import numpy as np
 import numpy.typing as npt
 
-from .errors import ParameterError
+from .errors import CatheterError, ParameterError
 from .units import FloatOrArray, m_to_mm, mm_to_m, rad_to_deg
 
 FloatArray = npt.NDArray[np.float64]
@@ -235,3 +237,44 @@ def straight_reference_from_samples(distance_m: npt.ArrayLike) -> float:
         raise ParameterError("distance_m is empty; the straight reference needs samples")
     _require_finite(s, "distance_m")
     return float(np.max(s))
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """The stored straight-tip reference of eq. 3.2.
+
+    The laser node's zeroing service writes it and the laser node reads it at start;
+    ``follow_trajectory --sim`` writes one for the emulated rig.
+    """
+
+    straight_distance_m: float
+    std_m: float
+    samples: int
+    zeroed_at: str
+
+    def save(self, path: Path) -> None:
+        """Write atomically (a crash mid-write must not leave a half file)."""
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(path.suffix + ".tmp")
+        tmp.write_text(json.dumps(self.__dict__, indent=2) + "\n")
+        tmp.replace(path)
+
+    @classmethod
+    def load(cls, path: Path) -> Calibration:
+        """Read a calibration file; CatheterError names what is wrong with it."""
+        try:
+            raw = json.loads(path.read_text())
+            cal = cls(
+                straight_distance_m=float(raw["straight_distance_m"]),
+                std_m=float(raw["std_m"]),
+                samples=int(raw["samples"]),
+                zeroed_at=str(raw["zeroed_at"]),
+            )
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise CatheterError(f"laser calibration {path} is unreadable: {exc}") from None
+        if not (math.isfinite(cal.straight_distance_m) and cal.straight_distance_m > 0):
+            raise CatheterError(
+                f"laser calibration {path}: straight_distance_m {cal.straight_distance_m} "
+                "is not a positive distance"
+            )
+        return cal

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
 
-from catheter_models.bag_messages import fluid_pressure_cdr
+from catheter_models.bag.messages import fluid_pressure_cdr
 from catheter_models.cli import main
 from catheter_models.lab.compare import Comparison, compare, write_report
 from catheter_models.metrics import REGIMES, compute_metrics, metrics_by_regime
@@ -202,7 +202,7 @@ def test_text_names_every_part_a_person_needs(truth: DRDPI) -> None:
 
 def _pressure_only_bag(path: Path) -> Path:
     """A bag with both pressure streams but no tip/angle: no model can be scored on it."""
-    from catheter_models.bag_messages import kilted_typestore
+    from catheter_models.bag.messages import kilted_typestore
 
     store = kilted_typestore()
     kind = "sensor_msgs/msg/FluidPressure"

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
 
-from catheter_models.bag_messages import fluid_pressure_cdr
+from catheter_models.bag.messages import fluid_pressure_cdr
 from catheter_models.cli import main
 from catheter_models.errors import MissingTopicError, SignalError
 from catheter_models.model_dir import ModelDirError
@@ -45,7 +45,7 @@ def test_recording_from_a_sample_bag() -> None:
 
 def _pressure_only_bag(path: Path) -> Path:
     """A bag with both pressure streams but no tip/angle: it cannot train a model."""
-    from catheter_models.bag_messages import kilted_typestore
+    from catheter_models.bag.messages import kilted_typestore
 
     store = kilted_typestore()
     kind = "sensor_msgs/msg/FluidPressure"

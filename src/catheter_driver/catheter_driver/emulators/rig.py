@@ -48,10 +48,10 @@ from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, TextIO
 
-from catheter_driver.rt_loop import DEFAULT_RT_PRIORITY, DeadlineLoop, set_process_realtime
 from catheter_driver.sim_hardware import SimHardware
 from catheter_models.errors import ParameterError
 from catheter_models.plant import PlantConfig, PlantSample
+from catheter_ros.rt_loop import DEFAULT_RT_PRIORITY, DeadlineLoop, set_process_realtime
 
 if TYPE_CHECKING:
     from catheter_driver.emulators.base import Emulator

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from catheter_models.bag_metadata import locate_bag
-from catheter_models.bag_reader import load_bag
+from catheter_models.bag.metadata import locate_bag
+from catheter_models.bag.reader import load_bag
 from catheter_models.contract import PRESSURE_COMMAND, SENSOR_RATE_HZ, TIP_ANGLE
 from catheter_models.errors import BagError, MissingTopicError
 from catheter_models.gaps import BagGapWarning

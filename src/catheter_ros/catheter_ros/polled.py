@@ -17,8 +17,8 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import FluidPressure
 
-from catheter_driver.qos import KEEP_EVERY_SAMPLE
 from catheter_models.contract import PRESSURE_COMMAND
+from catheter_ros.qos import KEEP_EVERY_SAMPLE
 
 
 def _never_called(_msg: Any) -> None:

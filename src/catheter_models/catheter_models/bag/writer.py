@@ -29,13 +29,13 @@ from mcap.well_known import MessageEncoding, Profile, SchemaEncoding
 from mcap.writer import CompressionType, Writer
 
 from catheter_models import __version__
-from catheter_models.bag_messages import (
+from catheter_models.bag.messages import (
     fluid_pressure_cdr,
     joint_state_cdr,
     kilted_typestore,
     range_cdr,
 )
-from catheter_models.bag_metadata import (
+from catheter_models.bag.metadata import (
     STREAM_QOS,
     BagSummary,
     QosProfile,

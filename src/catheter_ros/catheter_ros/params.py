@@ -64,7 +64,7 @@ def _declare(node: Node, name: str, default: Any, descriptor: ParameterDescripto
     """Declare, or adopt a parameter the node already declared from a command-line override.
 
     Driver nodes declare their ``<device>.*`` options from the overrides (see
-    ``lifecycle_util.declare_device_options``), and rclpy declares ``qos_overrides.*`` as
+    ``lifecycle_node.declare_device_options``), and rclpy declares ``qos_overrides.*`` as
     publishers are made, so a name may exist before we declare it. Its value is still checked
     against the range by the caller.
     """

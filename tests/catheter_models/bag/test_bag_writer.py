@@ -22,7 +22,7 @@ from catheter_models.bag import (
     QosProfile,
     write_bag_from_arrays,
 )
-from catheter_models.bag_messages import fluid_pressure_cdr, joint_state_cdr, kilted_typestore
+from catheter_models.bag.messages import fluid_pressure_cdr, joint_state_cdr, kilted_typestore
 from catheter_models.contract import PRESSURE_COMMAND, TIP_ANGLE, TRAJECTORY
 from catheter_models.errors import BagError, ParameterError
 from catheter_models.units import AMBIENT_PRESSURE_PA

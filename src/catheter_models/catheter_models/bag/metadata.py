@@ -112,7 +112,7 @@ SENSOR_DATA_QOS: Final = QosProfile(
 STREAM_QOS: Final = QosProfile(
     history="keep_last", depth=500, reliability="reliable", durability="volatile"
 )
-"""What the contract's sensor and command streams offer (``catheter_driver.qos.STREAM``)."""
+"""What the contract's sensor and command streams offer (``catheter_ros.qos.STREAM``)."""
 LATCHED_QOS: Final = QosProfile(
     history="keep_last", depth=1, reliability="reliable", durability="transient_local"
 )

@@ -12,7 +12,7 @@ import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
 
 from catheter_models.bag import BagRecorder, load_bag, write_bag_from_arrays
-from catheter_models.bag_messages import fluid_pressure_cdr, joint_state_cdr, kilted_typestore
+from catheter_models.bag.messages import fluid_pressure_cdr, joint_state_cdr, kilted_typestore
 from catheter_models.contract import PRESSURE_COMMAND, PRESSURE_MEASURED, TIP_ANGLE
 from catheter_models.errors import BagError, MissingTopicError, ParameterError
 from catheter_models.units import AMBIENT_PRESSURE_PA

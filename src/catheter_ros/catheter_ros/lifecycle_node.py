@@ -1,7 +1,7 @@
 """Helpers shared by the lifecycle-managed nodes (drivers and compensator).
 
 Who drives the transitions: a launch file (``LifecycleNode`` with configure and activate
-events), ``bringup`` (catheter_control.lifecycle_client), or ``ros2 lifecycle set``. For a
+events), ``bringup`` (catheter_ros.lifecycle_client), or ``ros2 lifecycle set``. For a
 node run alone, ``autostart:=true`` makes it configure and activate itself; by default it
 waits, unconfigured, so nothing moves until whoever launched it says so.
 """
@@ -13,8 +13,8 @@ from typing import Any
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rclpy.parameter import Parameter
 
-from catheter_driver.params import declare_plain
 from catheter_models.errors import CatheterError, ParameterError
+from catheter_ros.params import declare_plain
 
 
 def declare_autostart(node: LifecycleNode) -> bool:

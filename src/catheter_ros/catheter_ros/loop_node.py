@@ -7,9 +7,9 @@ from collections.abc import Callable
 from rclpy.lifecycle import LifecycleNode
 from rclpy.node import Node
 
-from catheter_driver.lifecycle_util import autostart_once, declare_autostart
-from catheter_driver.params import declare_int
-from catheter_driver.rt_loop import (
+from catheter_ros.lifecycle_node import autostart_once, declare_autostart
+from catheter_ros.params import declare_int
+from catheter_ros.rt_loop import (
     DEFAULT_RT_PRIORITY,
     DeadlineLoop,
     MonotonicStamper,

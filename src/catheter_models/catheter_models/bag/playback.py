@@ -14,8 +14,8 @@ from typing import Any
 from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.rosbag2 import ReaderError
 
-from catheter_models.bag_messages import kilted_typestore
-from catheter_models.bag_metadata import locate_bag
+from catheter_models.bag.messages import kilted_typestore
+from catheter_models.bag.metadata import locate_bag
 from catheter_models.errors import BagError, ParameterError
 
 

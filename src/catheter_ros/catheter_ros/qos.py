@@ -1,4 +1,4 @@
-"""QoS profiles the driver side needs (the control side re-exports them).
+"""QoS profiles of the interface contract, for every node of the graph.
 
 Why these (docs/interfaces.md, "QoS"): a stream's publisher offers reliable delivery with a
 deep history, and each subscriber asks for what it needs. Best-effort subscribers (controllers,
@@ -16,7 +16,13 @@ from typing import Any
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.node import Node
 from rclpy.publisher import Publisher
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+    qos_profile_sensor_data,
+)
 from rclpy.qos_overriding_options import InvalidQosOverridesError, QoSOverridingOptions
 
 from catheter_models.errors import ParameterError
@@ -57,6 +63,18 @@ RECORD = QoSProfile(
 """The recorder's request: every sample, re-sent if lost. It matches reliable publishers only,
 so the recorder falls back to ``KEEP_EVERY_SAMPLE`` on a topic where a publisher offers best
 effort (and says so)."""
+
+
+SENSOR = qos_profile_sensor_data
+"""What a controller asks of a stream: best effort, the newest few samples."""
+
+TRAJECTORY = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
+"""``trajectory``: reliable and transient-local, so a late subscriber still gets it."""
 
 
 def _valid_depth(profile: QoSProfile) -> Any:

@@ -13,7 +13,7 @@ import pytest
 PROGRAM = """
 import gc, os
 from rclpy.node import Node
-from catheter_driver.node_main import run_nodes
+from catheter_ros.node_main import run_nodes
 
 class Probe(Node):
     def __init__(self):

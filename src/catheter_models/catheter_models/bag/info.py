@@ -17,9 +17,9 @@ from mcap.records import Channel, Message, Schema
 from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.rosbag2 import ReaderError as Rosbag2ReaderError
 
-from catheter_models.bag_messages import kilted_typestore
-from catheter_models.bag_metadata import bag_custom_data, locate_bag
-from catheter_models.bag_scan import REPAIR_COMMAND, MessageSink, has_footer, scan_mcap
+from catheter_models.bag.messages import kilted_typestore
+from catheter_models.bag.metadata import bag_custom_data, locate_bag
+from catheter_models.bag.scan import REPAIR_COMMAND, MessageSink, has_footer, scan_mcap
 from catheter_models.errors import BagError
 from catheter_models.gaps import StreamGaps, header_stamp_ns, pauses_between_runs
 from catheter_models.units import NS_PER_S

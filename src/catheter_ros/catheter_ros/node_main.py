@@ -22,8 +22,8 @@ from rclpy.experimental.events_executor import EventsExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
-from catheter_driver.params import refuse_undeclared_overrides
 from catheter_models.errors import CatheterError
+from catheter_ros.params import refuse_undeclared_overrides
 
 
 def install_stop_handlers() -> threading.Event:

@@ -16,9 +16,9 @@ from types import MappingProxyType
 from mcap.records import Channel, Message, Schema
 from mcap.well_known import MessageEncoding
 
-from catheter_models.bag_metadata import BagLayout, custom_data_of, locate_bag
-from catheter_models.bag_scan import McapScan, scan_mcap
-from catheter_models.bag_writer import BagRecorder, SchemaText
+from catheter_models.bag.metadata import BagLayout, custom_data_of, locate_bag
+from catheter_models.bag.scan import McapScan, scan_mcap
+from catheter_models.bag.writer import BagRecorder, SchemaText
 from catheter_models.errors import BagError
 
 

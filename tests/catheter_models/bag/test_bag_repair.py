@@ -16,7 +16,7 @@ from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
 
 from catheter_models.bag import BagRecorder, load_bag, repair_bag, write_bag_from_arrays
-from catheter_models.bag_messages import fluid_pressure_cdr, joint_state_cdr
+from catheter_models.bag.messages import fluid_pressure_cdr, joint_state_cdr
 from catheter_models.contract import PRESSURE_COMMAND, PRESSURE_MEASURED, TIP_ANGLE, TRAJECTORY
 from catheter_models.errors import BagError, TruncatedBagError
 from catheter_models.units import AMBIENT_PRESSURE_PA

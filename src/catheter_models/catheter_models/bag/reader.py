@@ -23,14 +23,14 @@ from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.interfaces import Connection
 from rosbags.rosbag2 import ReaderError as Rosbag2ReaderError
 
-from catheter_models.bag_messages import (
+from catheter_models.bag.messages import (
     distance_of,
     gauge_pressure_of,
     joint_position_of,
     kilted_typestore,
 )
-from catheter_models.bag_metadata import BagLayout, bag_custom_data, locate_bag
-from catheter_models.bag_scan import has_footer, scan_mcap, truncated_bag_error
+from catheter_models.bag.metadata import BagLayout, bag_custom_data, locate_bag
+from catheter_models.bag.scan import has_footer, scan_mcap, truncated_bag_error
 from catheter_models.contract import (
     ANGLE_DESIRED,
     DEFAULT_NAMESPACE,

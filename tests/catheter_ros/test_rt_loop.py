@@ -5,7 +5,7 @@ import time
 
 import pytest
 
-from catheter_driver.rt_loop import DeadlineLoop, LatencyWindow, set_realtime
+from catheter_ros.rt_loop import DeadlineLoop, LatencyWindow, set_realtime
 
 
 def test_ticks_at_rate_on_absolute_deadlines() -> None:

@@ -6,10 +6,10 @@ from pathlib import Path
 
 import pytest
 
-from catheter_models.bag_playback import Player
+from catheter_models.bag.playback import Player
 from catheter_models.errors import BagError, ParameterError
 
-BAG = Path(__file__).resolve().parents[2] / "bags" / "model_test_descending_sine"
+BAG = Path(__file__).resolve().parents[3] / "bags" / "model_test_descending_sine"
 
 
 def test_messages_come_in_log_time_order_from_the_offset_on() -> None:

@@ -1,0 +1,39 @@
+"""Bag I/O of the science core: record, build, load, repair and describe rosbag2 MCAP bags.
+
+One import for callers (the recorder node, the CLI, analysis scripts); each job lives in its own
+module:
+
+* ``writer``   - ``BagRecorder`` (streaming recorder core), ``write_bag_from_arrays``
+* ``reader``   - ``load_bag`` -> ``BagData`` -> ``AlignedSeries``
+* ``playback`` - ``Player``: a bag's messages back onto the graph at their recorded pace
+* ``repair``   - ``repair_bag`` for bags whose recorder was killed
+* ``info``     - ``bag_info`` text summary
+* ``metadata`` - ``metadata.yaml``, QoS profiles, bag layout on disk
+* ``messages`` - contract messages <-> SI values
+* ``scan``     - front-to-back MCAP reading up to a truncation
+"""
+
+from __future__ import annotations
+
+from catheter_models.bag.info import bag_info
+from catheter_models.bag.metadata import LATCHED_QOS, SENSOR_DATA_QOS, STREAM_QOS, QosProfile
+from catheter_models.bag.reader import AlignedSeries, BagData, StampedSeries, load_bag
+from catheter_models.bag.repair import RepairReport, repair_bag
+from catheter_models.bag.writer import BagRecorder, SchemaText, write_bag_from_arrays
+
+__all__ = [
+    "LATCHED_QOS",
+    "SENSOR_DATA_QOS",
+    "STREAM_QOS",
+    "AlignedSeries",
+    "BagData",
+    "BagRecorder",
+    "QosProfile",
+    "RepairReport",
+    "SchemaText",
+    "StampedSeries",
+    "bag_info",
+    "load_bag",
+    "repair_bag",
+    "write_bag_from_arrays",
+]
