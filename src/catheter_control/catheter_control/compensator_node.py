@@ -42,7 +42,10 @@ from catheter_control.trajectory_action import RunProgress, TrajectoryActionServ
 from catheter_models.contract import (
     ANGLE_DESIRED,
     BEND_JOINT,
+    CONTROL_RATE_HZ,
+    MAX_PRESSURE_PA,
     PRESSURE_COMMAND,
+    PRESSURE_LIMIT_HARD_PA,
     PRESSURE_MEASURED,
     TIP_ANGLE,
     TRAJECTORY,
@@ -56,9 +59,11 @@ from catheter_ros.node_main import run_node
 from catheter_ros.params import declare_float, declare_plain
 from catheter_ros.polled import PolledTopics
 
-_RATE = ParamSpec("control_rate_hz", 250.0, 10.0, 2000.0, "control loop rate [Hz]")
-_PMIN = ParamSpec("min_pressure_pa", 0.0, 0.0, 6.0e5, "lowest command, gauge [Pa]")
-_PMAX = ParamSpec("max_pressure_pa", 3.0e5, 0.0, 6.0e5, "highest command, gauge [Pa]")
+_RATE = ParamSpec("control_rate_hz", CONTROL_RATE_HZ, 10.0, 2000.0, "control loop rate [Hz]")
+_PMIN = ParamSpec("min_pressure_pa", 0.0, 0.0, PRESSURE_LIMIT_HARD_PA, "lowest command, gauge [Pa]")
+_PMAX = ParamSpec(
+    "max_pressure_pa", MAX_PRESSURE_PA, 0.0, PRESSURE_LIMIT_HARD_PA, "highest command, gauge [Pa]"
+)
 _SLEW = ParamSpec("max_slew_pa_per_s", 20.0e5, 1.0e3, 1.0e8, "command slew limit [Pa/s]")
 _AMAX = ParamSpec("max_angle_rad", deg_to_rad(35.0), 0.0, 1.18, "highest desired bend [rad]")
 _VMAX = ParamSpec(
@@ -457,50 +462,52 @@ class CompensatorNode(LifecycleLoopNode):
         self._pub_des.publish(messages.joint_state(out.angle_desired_rad, stamp_ns))
 
     def _publish_diagnostics(self) -> None:
+        """One status a second: the lifecycle state, refusals and, while armed, the loop's timing.
+
+        The values are built in one place whatever the state, so an armed and a not-armed
+        report share their keys' names and order: state, compensator, (armed: set-up),
+        refusals, (armed: timing).
+        """
         loop = self.active_loop
         with self._lock:
             refusals, last, accepted = self._refusals, self._last_refusal, self._accepted
             standing = self._refusal_standing
             core = self.core
+        setup: dict[str, object] = {}
+        timing: dict[str, object] = {}
         if core is None or loop is None:
-            self._publish_not_armed(core is not None, refusals, last)
-            return
-        stats = loop.stats()
-        with self._lock:
-            state, bad_model = core.state, core.nonfinite_from_compensator
-            model_error, fault = core.compensator_error, core.fault_reason
-            model_steps = core.model_steps
-            fb = core.feedback
-            fb_values = (
-                {}
-                if fb is None
-                else {
-                    "feedback_integral_pa": f"{fb.integral_pa:.0f}",
-                    "feedback_untrusted_samples": fb.untrusted_samples,
-                    "feedback_saturated_ticks": fb.saturated_ticks,
-                }
-            )
-        now_s = time.monotonic()
-        level, message = diagnostics.OK, state
-        if loop.error is not None:
-            level, message = diagnostics.ERROR, f"control loop died: {loop.error!r}"
-        elif fault:
-            level, message = diagnostics.ERROR, f"stopped: {fault}; ramped down"
-        elif bad_model:
-            level, message = (
-                diagnostics.ERROR,
-                f"compensator failed ({model_error or 'non-finite pressure'}); ramped down",
-            )
-        elif standing:
-            level, message = diagnostics.WARN, f"trajectory refused: {last}"
-        diagnostics.publish_status(
-            self._pub_diag,
-            self,
-            level=level,
-            message=message,
-            values={
-                "state": state,
-                "compensator": self.kind,
+            state = "inactive" if core is not None else "unconfigured"
+            level, message = self._not_armed_level(core is not None)
+        else:
+            stats = loop.stats()
+            with self._lock:
+                state, bad_model = core.state, core.nonfinite_from_compensator
+                model_error, fault = core.compensator_error, core.fault_reason
+                model_steps = core.model_steps
+                fb = core.feedback
+                fb_values = (
+                    {}
+                    if fb is None
+                    else {
+                        "feedback_integral_pa": f"{fb.integral_pa:.0f}",
+                        "feedback_untrusted_samples": fb.untrusted_samples,
+                        "feedback_saturated_ticks": fb.saturated_ticks,
+                    }
+                )
+            now_s = time.monotonic()
+            level, message = diagnostics.OK, state
+            if loop.error is not None:
+                level, message = diagnostics.ERROR, f"control loop died: {loop.error!r}"
+            elif fault:
+                level, message = diagnostics.ERROR, f"stopped: {fault}; ramped down"
+            elif bad_model:
+                level, message = (
+                    diagnostics.ERROR,
+                    f"compensator failed ({model_error or 'non-finite pressure'}); ramped down",
+                )
+            elif standing:
+                level, message = diagnostics.WARN, f"trajectory refused: {last}"
+            setup = {
                 "control_rate_hz": f"{self.rate_hz:g}",
                 "model_rate_hz": f"{self.model_rate_hz:g}" if self.model_rate_hz else "any",
                 "model_steps": model_steps,
@@ -509,8 +516,8 @@ class CompensatorNode(LifecycleLoopNode):
                 "fault": fault,
                 "accept_trajectories": str(self.accept_trajectories).lower(),
                 "trajectories_accepted": accepted,
-                "trajectories_refused": refusals,
-                "last_refusal": last,
+            }
+            timing = {
                 "realtime": loop.realtime,
                 "ticks": stats.ticks,
                 "missed_deadlines": stats.missed,
@@ -529,29 +536,29 @@ class CompensatorNode(LifecycleLoopNode):
                     )
                     for name in self.watch.required
                 },
-            },
-        )
-
-    def _publish_not_armed(self, configured: bool, refusals: int, last: str) -> None:
-        """Not active: say which lifecycle state, and why configure failed if it did."""
-        if configured:
-            level, message = diagnostics.WARN, "configured, not active: trajectories refused"
-        elif self.transition_failure:
-            level, message = diagnostics.ERROR, self.transition_failure
-        else:
-            level, message = diagnostics.WARN, "not configured: trajectories refused"
+            }
         diagnostics.publish_status(
             self._pub_diag,
             self,
             level=level,
             message=message,
             values={
-                "state": "inactive" if configured else "unconfigured",
+                "state": state,
                 "compensator": self.kind,
+                **setup,
                 "trajectories_refused": refusals,
                 "last_refusal": last,
+                **timing,
             },
         )
+
+    def _not_armed_level(self, configured: bool) -> tuple[bytes, str]:
+        """Not active: say which lifecycle state, and why configure failed if it did."""
+        if configured:
+            return diagnostics.WARN, "configured, not active: trajectories refused"
+        if self.transition_failure:
+            return diagnostics.ERROR, self.transition_failure
+        return diagnostics.WARN, "not configured: trajectories refused"
 
     def destroy_node(self) -> None:
         """Stop the loop (which polls the sensors) before their helper node goes."""

@@ -15,7 +15,12 @@ import numpy as np
 import rclpy
 from sensor_msgs.msg import FluidPressure
 
-from catheter_models.contract import PRESSURE_COMMAND
+from catheter_models.contract import (
+    CONTROL_RATE_HZ,
+    MAX_PRESSURE_PA,
+    PRESSURE_COMMAND,
+    PRESSURE_LIMIT_HARD_PA,
+)
 from catheter_models.errors import SignalError
 from catheter_models.lab.signals import lab_spec
 from catheter_models.plant.config import ParamSpec
@@ -31,8 +36,14 @@ from catheter_ros.loop_node import LoopNode
 from catheter_ros.node_main import run_node
 from catheter_ros.params import declare_float, declare_int, declare_plain
 
-_RATE = ParamSpec("rate_hz", 250.0, 10.0, 2000.0, "command rate [Hz]")
-_PMAX = ParamSpec("max_pressure_pa", 3.0e5, 0.0, 6.0e5, "refuse signals above this, gauge [Pa]")
+_RATE = ParamSpec("rate_hz", CONTROL_RATE_HZ, 10.0, 2000.0, "command rate [Hz]")
+_PMAX = ParamSpec(
+    "max_pressure_pa",
+    MAX_PRESSURE_PA,
+    0.0,
+    PRESSURE_LIMIT_HARD_PA,
+    "refuse signals above this, gauge [Pa]",
+)
 _TAIL = ParamSpec("tail_s", 1.0, 0.0, 60.0, "zero pressure held after the signal [s]")
 _LEAD_IN = ParamSpec("lead_in_s", 0.5, 0.0, 60.0, "zero pressure sent before the signal [s]")
 _WAIT = ParamSpec("wait_for_subscriber_s", 10.0, 0.0, 600.0, "wait this long for a listener [s]")
