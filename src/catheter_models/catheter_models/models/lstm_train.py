@@ -52,13 +52,12 @@ from catheter_models.models.base import (
     MinMaxScaler,
     Recording,
 )
-from catheter_models.models.lstm import (
+from catheter_models.models.lstm_graph import (
     INPUT_NAME,
     METADATA_KEY,
     OUTPUT_NAME,
     STATE_INPUTS,
     STATE_OUTPUTS,
-    Form,
     GraphSpec,
     LSTMSettings,
 )
@@ -113,13 +112,6 @@ class WindowedNet(nn.Module):
         out, _ = self.lstm(x)
         y: torch.Tensor = self.head(out[:, -1, :])
         return y
-
-
-def build_network(form: Form, hidden_size: int, num_layers: int) -> StreamingNet | WindowedNet:
-    """A freshly initialised network of ``form`` (seed torch first for reproducibility)."""
-    if form == "streaming":
-        return StreamingNet(hidden_size, num_layers)
-    return WindowedNet(hidden_size, num_layers)
 
 
 def export_onnx(network: StreamingNet | WindowedNet, spec: GraphSpec) -> bytes:
