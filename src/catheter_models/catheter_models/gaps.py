@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from catheter_models.contract import RUN_STREAMS
+from catheter_models.units import NS_PER_S, ns_to_s
 
 GAP_FACTOR = 1.5
 """An interval longer than this many periods holds at least one lost sample."""
@@ -52,7 +53,7 @@ def header_stamp_ns(data: bytes) -> int | None:
     if len(data) < 12:
         return None
     sec, nanosec = struct.unpack_from("<iI" if data[1] == _CDR_LE else ">iI", data, 4)
-    return int(sec) * 1_000_000_000 + int(nanosec)
+    return int(sec) * NS_PER_S + int(nanosec)
 
 
 @dataclass(frozen=True)
@@ -72,7 +73,7 @@ class Gap:
     @property
     def duration_s(self) -> float:
         """The silence [s] (missing samples times the period, plus one period)."""
-        return (self.before_ns - self.after_ns) * 1e-9
+        return ns_to_s(self.before_ns - self.after_ns)
 
 
 def pauses_between_runs(topic: str) -> bool:
@@ -159,12 +160,12 @@ class StreamGaps:
                 self.gap_count -= 1
 
     def _learn(self) -> None:
-        self.period_s = float(np.median(np.fromiter(self._intervals, np.int64))) * 1e-9
+        self.period_s = ns_to_s(float(np.median(np.fromiter(self._intervals, np.int64))))
 
     def _judge(self, after_ns: int, before_ns: int) -> None:
         assert self.period_s is not None
         missing = missing_samples(
-            (before_ns - after_ns) * 1e-9, self.period_s, pause_s=self.pause_s
+            ns_to_s(before_ns - after_ns), self.period_s, pause_s=self.pause_s
         )
         if missing:
             self.lost += missing

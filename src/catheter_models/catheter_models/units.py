@@ -75,6 +75,6 @@ def s_to_ns(time_s: float) -> int:
     return round(time_s * NS_PER_S)
 
 
-def ns_to_s(time_ns: int) -> float:
+def ns_to_s(time_ns: float) -> float:
     """Integer nanoseconds to seconds."""
     return time_ns / NS_PER_S

@@ -22,7 +22,7 @@ from catheter_models.bag.metadata import bag_custom_data, locate_bag
 from catheter_models.bag.scan import REPAIR_COMMAND, MessageSink, has_footer, scan_mcap
 from catheter_models.errors import BagError
 from catheter_models.gaps import StreamGaps, header_stamp_ns, pauses_between_runs
-from catheter_models.units import NS_PER_S
+from catheter_models.units import NS_PER_S, ns_to_s
 
 _STAMPED_STREAMS = {
     "sensor_msgs/msg/FluidPressure",
@@ -121,9 +121,9 @@ def _format(path: Path, stats: dict[str, _TopicStats], custom: dict[str, str]) -
     total = sum(s.count for s in stats.values())
     lines = [f"bag:       {path}", f"messages:  {total}"]
     if firsts and lasts:
-        start = datetime.fromtimestamp(min(firsts) / NS_PER_S, tz=timezone.utc)
+        start = datetime.fromtimestamp(ns_to_s(min(firsts)), tz=timezone.utc)
         lines.append(f"start:     {start.isoformat(timespec='milliseconds')}")
-        lines.append(f"duration:  {(max(lasts) - min(firsts)) / NS_PER_S:.3f} s")
+        lines.append(f"duration:  {ns_to_s(max(lasts) - min(firsts)):.3f} s")
     lines.append("topics:")
     width = max((len(t) for t in stats), default=0)
     type_width = max((len(s.msgtype) for s in stats.values()), default=0)

@@ -17,6 +17,7 @@ from rosbags.rosbag2 import ReaderError
 from catheter_models.bag.messages import kilted_typestore
 from catheter_models.bag.metadata import locate_bag
 from catheter_models.errors import BagError, ParameterError
+from catheter_models.units import ns_to_s, s_to_ns
 
 
 @dataclass(frozen=True)
@@ -103,11 +104,11 @@ class Player:
     @property
     def duration_s(self) -> float:
         """From the first to the last log time [s]."""
-        return (self.end_ns - self.start_ns) * 1e-9
+        return ns_to_s(self.end_ns - self.start_ns)
 
     def messages(self, start_offset_s: float = 0.0) -> Iterator[tuple[str, int, bytes]]:
         """(recorded topic, log time [ns], serialized message), in log-time order."""
-        first_ns = self.start_ns + round(start_offset_s * 1e9)
+        first_ns = self.start_ns + s_to_ns(start_offset_s)
         with AnyReader([self._reader_path], default_typestore=kilted_typestore()) as reader:
             wanted = [c for c in reader.connections if c.topic in self.topics]
             for conn, log_ns, raw in reader.messages(connections=wanted, start=first_ns):

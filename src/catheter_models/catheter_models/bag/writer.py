@@ -55,7 +55,7 @@ from catheter_models.contract import (
     qualify,
 )
 from catheter_models.errors import BagError, ParameterError
-from catheter_models.units import AMBIENT_PRESSURE_PA, NS_PER_S
+from catheter_models.units import AMBIENT_PRESSURE_PA, NS_PER_S, s_to_ns
 
 DEFAULT_FLUSH_PERIOD_S: Final = 0.5
 DEFAULT_CHUNK_SIZE_BYTES: Final = 1024 * 1024
@@ -175,7 +175,7 @@ class BagRecorder:
             raise BagError(msg) from None
         self.mcap_path = self.path / f"{self.path.name}_0.mcap"
 
-        self._flush_period_ns = None if flush_period_s is None else round(flush_period_s * NS_PER_S)
+        self._flush_period_ns = None if flush_period_s is None else s_to_ns(flush_period_s)
         self._flush_period_s = flush_period_s
         self._fsync = fsync
         self._clock = clock
