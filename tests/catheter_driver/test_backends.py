@@ -37,7 +37,7 @@ from catheter_driver.emulators.dac_bridge import DacBridgeEmulator
 from catheter_driver.emulators.keller import KellerEmulator
 from catheter_driver.emulators.laser_adc import LaserAdcCanEmulator, LaserAdcSerialEmulator
 from catheter_driver.emulators.pty_endpoint import PtyEndpoint
-from catheter_driver.emulators.rig import EmulatedRig
+from catheter_driver.emulators.rig_core import EmulatedRig
 from catheter_driver.transports import make_transport
 from catheter_driver.transports.can_transport import CanTransport
 from catheter_driver.transports.serial_transport import SerialTransport

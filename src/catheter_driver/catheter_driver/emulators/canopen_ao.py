@@ -7,7 +7,7 @@ import threading
 import time
 
 from catheter_driver.emulators.base import Emulator, HostFailsafe
-from catheter_driver.emulators.rig import EmulatedRig
+from catheter_driver.emulators.rig_core import EmulatedRig
 from catheter_driver.protocols import FrameError, canopen_ao
 from catheter_driver.transports.base import FrameTransport, TransportError
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 
 from catheter_driver.emulators.base import Emulator, HostFailsafe
-from catheter_driver.emulators.rig import EmulatedRig
+from catheter_driver.emulators.rig_core import EmulatedRig
 from catheter_driver.protocols import dac_bridge
 from catheter_driver.transports.base import ByteTransport, TransportError
 

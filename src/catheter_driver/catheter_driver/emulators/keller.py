@@ -5,7 +5,7 @@ from __future__ import annotations
 import threading
 
 from catheter_driver.emulators.base import Emulator
-from catheter_driver.emulators.rig import EmulatedRig
+from catheter_driver.emulators.rig_core import EmulatedRig
 from catheter_driver.protocols import ParserCounters, keller
 from catheter_driver.transports.base import ByteTransport, TransportError
 

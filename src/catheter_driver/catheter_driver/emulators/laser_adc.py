@@ -6,7 +6,7 @@ import threading
 from abc import abstractmethod
 
 from catheter_driver.emulators.base import Emulator
-from catheter_driver.emulators.rig import EmulatedRig
+from catheter_driver.emulators.rig_core import EmulatedRig
 from catheter_driver.protocols import laser_adc
 from catheter_driver.transports.base import ByteTransport, FrameTransport, TransportError
 from catheter_models.plant import PlantSample

@@ -4,6 +4,9 @@ The driver side is a real tty, so the real :class:`SerialTransport` opens it lik
 adapter. The emulator keeps the slave open too, so the pty survives the driver closing and
 reopening it, and writes to the master without blocking: bytes no one reads are dropped
 (counted), as a real device's UART would overrun rather than stall.
+
+:class:`PtyDevice` puts a stable symlink in front of an endpoint and can unplug and replug
+it, as the rig program's ``unplug``/``replug`` commands do.
 """
 
 from __future__ import annotations
@@ -13,6 +16,8 @@ import errno
 import os
 import select
 import tty
+from pathlib import Path
+from typing import Any
 
 from catheter_driver.transports.base import ByteTransport, TransportError
 
@@ -102,3 +107,54 @@ class PtyEndpoint(ByteTransport):
         """Discard what the driver has sent and we have not read."""
         while self.read(4096, 0.0):
             pass
+
+
+class PtyDevice:
+    """A pty endpoint reachable at a stable symlink, which can be unplugged and replugged.
+
+    The symlink stands for the path a udev rule gives a real adapter: a driver finds a
+    replugged device at the same path although its ``/dev/pts/N`` changed.
+
+    Args:
+        endpoint: the emulator's end of the pty.
+        link: where the symlink goes (replaced if it exists).
+    """
+
+    def __init__(self, endpoint: PtyEndpoint, link: Path) -> None:
+        self.endpoint = endpoint
+        self.link = link
+        self.plugged = True
+        self._point_link()
+
+    def _point_link(self) -> None:
+        # Atomic: a driver opening the path sees the old target or the new one, never none.
+        tmp = self.link.with_name(f".{self.link.name}.tmp")
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+        tmp.symlink_to(self.endpoint.slave_path)
+        tmp.replace(self.link)
+
+    def unplug(self) -> None:
+        """Close the pty (the driver's port dies) and remove the symlink, as udev would.
+
+        The emulator keeps running, as a device keeps its own power: a valve interface's
+        fail-safe still vents.
+        """
+        self.endpoint.close()
+        with contextlib.suppress(FileNotFoundError):
+            self.link.unlink()
+        self.plugged = False
+
+    def replug(self) -> None:
+        """A new pty (a new /dev/pts/N); the symlink points at it."""
+        self.endpoint.open()
+        self._point_link()
+        self.plugged = True
+
+    def state(self) -> dict[str, Any]:
+        """Plain values for a status report: the symlink, its pty, whether plugged."""
+        return {
+            "port": str(self.link),
+            "pty": self.endpoint.slave_path if self.plugged else None,
+            "plugged": self.plugged,
+        }
