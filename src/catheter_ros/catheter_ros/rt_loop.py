@@ -17,6 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from catheter_models.units import s_to_ns
+
 
 @dataclass(frozen=True)
 class LoopStats:
@@ -204,11 +206,11 @@ class MonotonicStamper:
     """
 
     def __init__(self, ros_now_ns: int) -> None:
-        self._offset_ns = ros_now_ns - round(time.monotonic() * 1e9)
+        self._offset_ns = ros_now_ns - s_to_ns(time.monotonic())
 
     def ns(self, mono_s: float) -> int:
         """ROS time [ns] of the monotonic instant ``mono_s`` [s]."""
-        return self._offset_ns + round(mono_s * 1e9)
+        return self._offset_ns + s_to_ns(mono_s)
 
 
 class LatencyWindow:
