@@ -1,7 +1,10 @@
 """The interface contract (``docs/interfaces.md``) as constants.
 
 Nodes, the recorder and the bag loader all read topic names, types and the joint name from
-here, so a change to the contract is one edit and a reviewer sees it in one place.
+here, and so do the nodes, the simulated plant and model evaluation for the pressure limits,
+the rates and the QoS numbers, so a change to the contract is one edit and a reviewer sees it
+in one place. A limit that could be changed in one place and not in another would be a safety
+defect; ``tests/test_one_source.py`` fails if one of these numbers is typed anywhere else.
 """
 
 from __future__ import annotations
@@ -26,6 +29,40 @@ parameter, and every such parameter defaults to this one value."""
 PRESSURE_LIMIT_HARD_PA: Final = 6.0e5
 """The highest value any ``max_pressure_pa`` parameter accepts (6 bar): beyond it a typo, not a
 choice. The muscle's rated pressure on the thesis's rig."""
+
+
+STREAM_DEPTH: Final = 500
+"""Samples a stream's publisher keeps for re-sending, and a keeping subscriber queues: 2 s at
+250 Hz, 0.5 s at 1 kHz (longer than any stall measured on a busy machine)."""
+
+
+class QosSpec(NamedTuple):
+    """One QoS profile of the contract as plain data.
+
+    Both rclpy's profiles (``catheter_ros.qos``) and a bag's ``metadata.yaml``
+    (``catheter_models.bag.metadata``) are built from these, so they cannot disagree. Every
+    profile of the contract keeps the last ``depth`` samples (history keep-last).
+    """
+
+    depth: int
+    reliable: bool
+    """Reliable (re-sent if lost) rather than best effort."""
+    transient_local: bool
+    """Transient-local (a late subscriber still gets the last ``depth``) rather than volatile."""
+
+
+QOS_STREAM: Final = QosSpec(depth=STREAM_DEPTH, reliable=True, transient_local=False)
+"""What every sensor and command stream offers (``catheter_ros.qos.STREAM``)."""
+QOS_KEEP_EVERY_SAMPLE: Final = QosSpec(depth=STREAM_DEPTH, reliable=False, transient_local=False)
+"""Best effort with a deep queue (``catheter_ros.qos.KEEP_EVERY_SAMPLE``): matches any publisher
+and keeps every sample that reaches the listener."""
+QOS_RECORD: Final = QosSpec(depth=STREAM_DEPTH, reliable=True, transient_local=False)
+"""The recorder's request (``catheter_ros.qos.RECORD``): every sample, re-sent if lost."""
+QOS_TRAJECTORY: Final = QosSpec(depth=1, reliable=True, transient_local=True)
+"""``trajectory`` (``catheter_ros.qos.TRAJECTORY``): latched, so a late subscriber still gets it."""
+QOS_SENSOR_DATA: Final = QosSpec(depth=5, reliable=False, transient_local=False)
+"""rclpy's ``qos_profile_sensor_data`` (``catheter_ros.qos.SENSOR``): what a controller asks of
+a stream, and what the streams offered before they were reliable (older bags record it)."""
 
 
 class TopicSpec(NamedTuple):

@@ -6,6 +6,10 @@ which want the newest sample) still match a reliable publisher and never slow it
 subscriber (the recorder) gets every sample re-sent if the wire or its own busy process lost
 one. With best-effort publishers, a recorder on a busy 2-core machine lost 88 ms runs of a
 sensor stream, and nothing could ask for them again.
+
+The numbers (depths, reliability, durability) are the contract's (``catheter_models.contract``,
+``QOS_*``), where a bag's ``metadata.yaml`` reads them too; this module only turns them into
+rclpy's profile objects.
 """
 
 from __future__ import annotations
@@ -25,55 +29,55 @@ from rclpy.qos import (
 )
 from rclpy.qos_overriding_options import InvalidQosOverridesError, QoSOverridingOptions
 
+from catheter_models.contract import (
+    QOS_KEEP_EVERY_SAMPLE,
+    QOS_RECORD,
+    QOS_STREAM,
+    QOS_TRAJECTORY,
+    STREAM_DEPTH,  # noqa: F401  (re-exported: importable beside the profiles it sizes)
+    QosSpec,
+)
 from catheter_models.errors import ParameterError
 
-STREAM_DEPTH = 500
-"""Samples a stream's publisher keeps for re-sending, and a keeping subscriber queues: 2 s at
-250 Hz, 0.5 s at 1 kHz (longer than any stall measured on a busy machine)."""
 
-STREAM = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=STREAM_DEPTH,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.VOLATILE,
-)
+def profile_of(spec: QosSpec) -> QoSProfile:
+    """The rclpy profile of one of the contract's QoS specs (history keep-last, as they all are)."""
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=spec.depth,
+        reliability=ReliabilityPolicy.RELIABLE if spec.reliable else ReliabilityPolicy.BEST_EFFORT,
+        durability=(
+            DurabilityPolicy.TRANSIENT_LOCAL if spec.transient_local else DurabilityPolicy.VOLATILE
+        ),
+    )
+
+
+STREAM = profile_of(QOS_STREAM)
 """What every sensor and command stream offers: reliable, keep last ``STREAM_DEPTH``.
 
 Keep-last, not keep-all: a publisher never blocks on a slow subscriber (a real-time loop must
 not wait on a recorder); a subscriber more than ``STREAM_DEPTH`` samples behind loses the
 oldest, and the recorder counts that from the stamps."""
 
-KEEP_EVERY_SAMPLE = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=STREAM_DEPTH,
-    reliability=ReliabilityPolicy.BEST_EFFORT,
-    durability=DurabilityPolicy.VOLATILE,
-)
+KEEP_EVERY_SAMPLE = profile_of(QOS_KEEP_EVERY_SAMPLE)
 """Best-effort with a deep queue, for listeners that must see every sample that reaches them
 and must also match a best-effort publisher (a user's own controller): the drivers count and
 refuse every bad command. With the sensor profile's depth of 5 (20 ms), a listener whose
 thread was busy for a moment lost runs of messages, uncounted."""
 
-RECORD = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=STREAM_DEPTH,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.VOLATILE,
-)
+RECORD = profile_of(QOS_RECORD)
 """The recorder's request: every sample, re-sent if lost. It matches reliable publishers only,
 so the recorder falls back to ``KEEP_EVERY_SAMPLE`` on a topic where a publisher offers best
 effort (and says so)."""
 
 
 SENSOR = qos_profile_sensor_data
-"""What a controller asks of a stream: best effort, the newest few samples."""
+"""What a controller asks of a stream: best effort, the newest few samples.
 
-TRAJECTORY = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=1,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.TRANSIENT_LOCAL,
-)
+rclpy's own profile object, not one built from ``contract.QOS_SENSOR_DATA``: it is the ROS
+convention this name stands for; ``tests/test_one_source.py`` checks the two agree."""
+
+TRAJECTORY = profile_of(QOS_TRAJECTORY)
 """``trajectory``: reliable and transient-local, so a late subscriber still gets it."""
 
 

@@ -11,6 +11,10 @@ Two details matter for interoperability:
   ignores a topic whose two copies differ, so both are produced from the same profile list.
 * ``custom_data`` is a string-to-string map (rosbag2 decodes it as such); the experiment's
   description lives there.
+
+The offered profiles of the contract's topics come from its QoS specs
+(``catheter_models.contract.QOS_*``), the same numbers ``catheter_ros.qos`` builds rclpy's
+profiles from, so a bag records what the nodes really offer.
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ import yaml
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 
+from catheter_models.contract import QOS_SENSOR_DATA, QOS_STREAM, QOS_TRAJECTORY, QosSpec
 from catheter_models.errors import BagError, ParameterError
 
 METADATA_FILE: Final = "metadata.yaml"
@@ -105,17 +110,21 @@ class QosProfile:
         }
 
 
-SENSOR_DATA_QOS: Final = QosProfile(
-    history="keep_last", depth=5, reliability="best_effort", durability="volatile"
-)
+def offered_qos(spec: QosSpec) -> QosProfile:
+    """How ``metadata.yaml`` records a publisher offering one of the contract's QoS specs."""
+    return QosProfile(
+        history="keep_last",
+        depth=spec.depth,
+        reliability="reliable" if spec.reliable else "best_effort",
+        durability="transient_local" if spec.transient_local else "volatile",
+    )
+
+
+SENSOR_DATA_QOS: Final = offered_qos(QOS_SENSOR_DATA)
 """rclpy's ``qos_profile_sensor_data``: what the streams offered before they were reliable."""
-STREAM_QOS: Final = QosProfile(
-    history="keep_last", depth=500, reliability="reliable", durability="volatile"
-)
+STREAM_QOS: Final = offered_qos(QOS_STREAM)
 """What the contract's sensor and command streams offer (``catheter_ros.qos.STREAM``)."""
-LATCHED_QOS: Final = QosProfile(
-    history="keep_last", depth=1, reliability="reliable", durability="transient_local"
-)
+LATCHED_QOS: Final = offered_qos(QOS_TRAJECTORY)
 """Reliable, transient-local: what the contract's ``trajectory`` topic offers."""
 
 
