@@ -24,7 +24,7 @@ from typing import Any
 
 import pytest
 
-from catheter_driver.devices.base import Device, DeviceError, DeviceTimeout, LaserAdc
+from catheter_driver.devices.base import Device, LaserAdc
 from catheter_driver.devices.can_laser_adc import CanLaserAdc
 from catheter_driver.devices.canopen_valve import CanopenValve
 from catheter_driver.devices.dac_bridge_valve import DacBridgeValve
@@ -38,6 +38,7 @@ from catheter_driver.emulators.keller import KellerEmulator
 from catheter_driver.emulators.laser_adc import LaserAdcCanEmulator, LaserAdcSerialEmulator
 from catheter_driver.emulators.pty_endpoint import PtyEndpoint
 from catheter_driver.emulators.rig_core import EmulatedRig
+from catheter_driver.errors import DeviceError, DeviceTimeout
 from catheter_driver.transports import make_transport
 from catheter_driver.transports.can_transport import CanTransport
 from catheter_driver.transports.serial_transport import SerialTransport

@@ -4,12 +4,8 @@ import math
 
 import pytest
 
-from catheter_driver.devices.base import (
-    DeviceError,
-    DeviceTimeout,
-    PressureTransmitter,
-    ValveSetpoint,
-)
+from catheter_driver.devices.base import PressureTransmitter, ValveSetpoint
+from catheter_driver.errors import DeviceError, DeviceTimeout
 from catheter_driver.valve_core import MAX_CONSECUTIVE_TIMEOUTS, ValveDriverCore
 
 DT = 0.004

@@ -16,13 +16,8 @@ from dataclasses import dataclass
 from typing import Generic, TypeVar
 
 from catheter_driver.command_order import CommandOrder
-from catheter_driver.devices.base import (
-    Device,
-    DeviceError,
-    DeviceTimeout,
-    PressureTransmitter,
-    ValveSetpoint,
-)
+from catheter_driver.devices.base import Device, PressureTransmitter, ValveSetpoint
+from catheter_driver.errors import DeviceError, DeviceTimeout
 
 MAX_CONSECUTIVE_TIMEOUTS = 5
 """A missed reply is counted; this many in a row mean the device is gone."""

@@ -11,15 +11,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 
-from catheter_models.errors import CatheterError
-
-
-class DeviceError(CatheterError):
-    """A device cannot be reached: port gone, bus down, or the device answers with an error."""
-
-
-class DeviceTimeout(DeviceError):  # noqa: N818 (reads as a condition, like TimeoutError)
-    """A reply did not come within the timeout."""
+from catheter_driver.errors import DeviceError
 
 
 @dataclass

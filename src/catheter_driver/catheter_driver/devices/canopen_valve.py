@@ -5,7 +5,8 @@ from __future__ import annotations
 import time
 from typing import cast
 
-from catheter_driver.devices.base import DeviceError, ValveSetpoint
+from catheter_driver.devices.base import ValveSetpoint
+from catheter_driver.errors import DeviceError
 from catheter_driver.protocols import FrameError, canopen_ao
 from catheter_driver.transports import FrameTransport, make_transport
 

@@ -6,7 +6,8 @@ import math
 import time
 from typing import cast
 
-from catheter_driver.devices.base import DeviceError, DeviceTimeout, ValveSetpoint
+from catheter_driver.devices.base import ValveSetpoint
+from catheter_driver.errors import DeviceError, DeviceTimeout
 from catheter_driver.protocols import dac_bridge
 from catheter_driver.transports import ByteTransport, make_transport
 from catheter_models.errors import ParameterError

@@ -6,7 +6,8 @@ import math
 import time
 from typing import cast
 
-from catheter_driver.devices.base import DeviceError, DeviceTimeout, PressureTransmitter
+from catheter_driver.devices.base import PressureTransmitter
+from catheter_driver.errors import DeviceError, DeviceTimeout
 from catheter_driver.protocols import keller
 from catheter_driver.transports import ByteTransport, make_transport
 from catheter_models.errors import ParameterError

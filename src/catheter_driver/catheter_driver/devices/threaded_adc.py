@@ -12,7 +12,8 @@ import time
 from abc import abstractmethod
 from collections import deque
 
-from catheter_driver.devices.base import DeviceError, LaserAdc, LaserSample
+from catheter_driver.devices.base import LaserAdc, LaserSample
+from catheter_driver.errors import DeviceError
 from catheter_driver.protocols.laser_adc import AdcFrame, seq_gap
 
 _POLL_S = 0.05

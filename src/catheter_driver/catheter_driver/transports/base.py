@@ -2,7 +2,7 @@
 
 Like python-can's ``BusABC``, each is a small abstract class; a backend implements only the
 I/O. Every failure of the underlying library (port unplugged, bus down) surfaces as
-:class:`TransportError`, a :class:`~catheter_driver.devices.base.DeviceError`, so callers
+:class:`TransportError`, a :class:`~catheter_driver.errors.DeviceError`, so callers
 never catch pyserial or python-can exceptions.
 """
 
@@ -11,7 +11,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from types import TracebackType
 
-from catheter_driver.devices.base import DeviceError
+from catheter_driver.errors import DeviceError
 
 
 class TransportError(DeviceError):
