@@ -24,7 +24,12 @@ from std_srvs.srv import Trigger
 
 from catheter_driver.devices.factory import make_laser_adc
 from catheter_driver.laser_core import LaserAngleCore, ZeroingError
-from catheter_models.contract import PRESSURE_MEASURED, TIP_ANGLE, TIP_DISTANCE
+from catheter_models.contract import (
+    PRESSURE_MEASURED,
+    SENSOR_RATE_HZ,
+    TIP_ANGLE,
+    TIP_DISTANCE,
+)
 from catheter_models.errors import CatheterError
 from catheter_models.geometry import Calibration, LaserGeometry
 from catheter_models.plant.config import ParamSpec
@@ -36,11 +41,11 @@ from catheter_ros.lifecycle_node import (
     device_options,
 )
 from catheter_ros.loop_node import declare_rt_priority, make_process_realtime
-from catheter_ros.node_main import run_node
+from catheter_ros.node_main import run_node_as_main
 from catheter_ros.params import declare_float, declare_plain
 from catheter_ros.rt_loop import DeadlineLoop, MonotonicStamper
 
-_RATE = ParamSpec("rate_hz", 250.0, 10.0, 5000.0, "the ADC bridge's sample rate [Hz]")
+_RATE = ParamSpec("rate_hz", SENSOR_RATE_HZ, 10.0, 5000.0, "the ADC bridge's sample rate [Hz]")
 _M = ParamSpec("laser.m_per_v", 4.05e-3, 1e-4, 0.1, "eq. 3.1 slope m [m/V]")
 _N = ParamSpec("laser.offset_m", 29.36e-3, 0.0, 1.0, "eq. 3.1 offset n [m]")
 _L = ParamSpec("laser.length_m", 0.077, 1e-3, 1.0, "eq. 3.3 bending length L [m]")
@@ -279,9 +284,7 @@ class LaserAngleNode(LifecycleNode):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run catheter_driver laser_angle``."""
-    code = run_node(LaserAngleNode, args)
-    if code:
-        raise SystemExit(code)
+    run_node_as_main(LaserAngleNode, args)
 
 
 if __name__ == "__main__":

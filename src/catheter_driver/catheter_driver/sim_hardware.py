@@ -13,6 +13,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 from catheter_driver.command_order import CommandOrder
+from catheter_models.contract import MAX_PRESSURE_PA
 from catheter_models.plant import Plant, PlantConfig, PlantSample
 
 
@@ -46,7 +47,10 @@ class SimHardware:
     """
 
     def __init__(
-        self, config: PlantConfig, max_pressure_pa: float = 3.0e5, command_timeout_s: float = 0.1
+        self,
+        config: PlantConfig,
+        max_pressure_pa: float = MAX_PRESSURE_PA,
+        command_timeout_s: float = 0.1,
     ) -> None:
         self.plant = Plant(config)
         self.max_pressure_pa = max_pressure_pa

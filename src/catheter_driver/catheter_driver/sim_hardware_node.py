@@ -20,18 +20,28 @@ from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import FluidPressure, JointState, Range
 
 from catheter_driver.sim_hardware import SimHardware
-from catheter_models.contract import PRESSURE_MEASURED, TIP_ANGLE, TIP_DISTANCE
+from catheter_models.contract import (
+    MAX_PRESSURE_PA,
+    PRESSURE_LIMIT_HARD_PA,
+    PRESSURE_MEASURED,
+    TIP_ANGLE,
+    TIP_DISTANCE,
+)
 from catheter_models.errors import CatheterError
 from catheter_models.plant.config import EFFECTS, RIG_PARAMS, ParamSpec, PlantConfig
 from catheter_ros import diagnostics, messages, qos
 from catheter_ros.loop_node import LifecycleLoopNode
-from catheter_ros.node_main import run_node
+from catheter_ros.node_main import run_node_as_main
 from catheter_ros.params import declare_float, declare_int, declare_plain
 from catheter_ros.polled import PressureCommands
 from catheter_ros.rt_loop import LatencyWindow
 
 _MAX_PRESSURE = ParamSpec(
-    "max_pressure_pa", 3.0e5, 0.0, 6.0e5, "safety limit: commands above clamp here, gauge [Pa]"
+    "max_pressure_pa",
+    MAX_PRESSURE_PA,
+    0.0,
+    PRESSURE_LIMIT_HARD_PA,
+    "safety limit: commands above clamp here, gauge [Pa]",
 )
 _TIMEOUT = ParamSpec(
     "command_timeout_s", 0.1, 0.01, 5.0, "vent when commands stop for longer than this [s]"
@@ -215,9 +225,7 @@ class SimHardwareNode(LifecycleLoopNode):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run catheter_driver sim_hardware``."""
-    code = run_node(SimHardwareNode, args)
-    if code:
-        raise SystemExit(code)
+    run_node_as_main(SimHardwareNode, args)
 
 
 if __name__ == "__main__":

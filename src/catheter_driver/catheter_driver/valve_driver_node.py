@@ -23,7 +23,12 @@ from std_srvs.srv import SetBool, Trigger
 
 from catheter_driver.devices.factory import make_transmitter, make_valve
 from catheter_driver.valve_core import ValveDriverCore
-from catheter_models.contract import PRESSURE_MEASURED
+from catheter_models.contract import (
+    CONTROL_RATE_HZ,
+    MAX_PRESSURE_PA,
+    PRESSURE_LIMIT_HARD_PA,
+    PRESSURE_MEASURED,
+)
 from catheter_models.errors import CatheterError
 from catheter_models.plant.config import ParamSpec
 from catheter_models.units import AMBIENT_PRESSURE_PA
@@ -34,14 +39,20 @@ from catheter_ros.lifecycle_node import (
     device_options,
 )
 from catheter_ros.loop_node import declare_rt_priority, make_process_realtime
-from catheter_ros.node_main import run_node
+from catheter_ros.node_main import run_node_as_main
 from catheter_ros.params import declare_float, declare_plain
 from catheter_ros.polled import PressureCommands
 from catheter_ros.rt_loop import DeadlineLoop, LatencyWindow, MonotonicStamper
 
-_RATE = ParamSpec("rate_hz", 250.0, 10.0, 2000.0, "control loop and transmitter poll rate [Hz]")
-_PMIN = ParamSpec("min_pressure_pa", 0.0, 0.0, 6.0e5, "lowest set-point, gauge [Pa]")
-_PMAX = ParamSpec("max_pressure_pa", 3.0e5, 0.0, 6.0e5, "highest set-point, gauge [Pa]")
+_RATE = ParamSpec(
+    "rate_hz", CONTROL_RATE_HZ, 10.0, 2000.0, "control loop and transmitter poll rate [Hz]"
+)
+_PMIN = ParamSpec(
+    "min_pressure_pa", 0.0, 0.0, PRESSURE_LIMIT_HARD_PA, "lowest set-point, gauge [Pa]"
+)
+_PMAX = ParamSpec(
+    "max_pressure_pa", MAX_PRESSURE_PA, 0.0, PRESSURE_LIMIT_HARD_PA, "highest set-point, gauge [Pa]"
+)
 _SLEW = ParamSpec("max_slew_pa_per_s", 20.0e5, 1.0e3, 1.0e8, "set-point slew limit [Pa/s]")
 _WATCHDOG = ParamSpec("watchdog_s", 0.1, 0.01, 5.0, "vent when commands stop this long [s]")
 _RECONNECT = ParamSpec("reconnect_period_s", 1.0, 0.05, 60.0, "retry a lost device this often [s]")
@@ -312,9 +323,7 @@ class ValveDriverNode(LifecycleNode):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run catheter_driver valve_driver``."""
-    code = run_node(ValveDriverNode, args)
-    if code:
-        raise SystemExit(code)
+    run_node_as_main(ValveDriverNode, args)
 
 
 if __name__ == "__main__":

@@ -39,6 +39,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from catheter_models.contract import SENSOR_RATE_HZ
 from catheter_models.errors import CatheterError
 from catheter_models.gaps import BagGapWarning
 
@@ -543,7 +544,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="NAME=VALUE",
         help="a model setting (JSON value), e.g. --set n_play=12; repeatable",
     )
-    train.add_argument("--rate-hz", type=float, default=250.0, help="resampling rate [Hz]")
+    train.add_argument("--rate-hz", type=float, default=SENSOR_RATE_HZ, help="resampling rate [Hz]")
     train.add_argument("--quiet", action="store_true", help="no progress bar")
     train.set_defaults(func=_cmd_train)
 
@@ -568,7 +569,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="bound on Ms (1.6: gain margin >= 2.7, phase margin >= 36 deg)",
     )
     tune.add_argument("--report", type=Path, default=None, help="write an HTML report here")
-    tune.add_argument("--rate-hz", type=float, default=250.0, help="resampling rate [Hz]")
+    tune.add_argument("--rate-hz", type=float, default=SENSOR_RATE_HZ, help="resampling rate [Hz]")
     tune.set_defaults(func=_cmd_tune)
 
     models = sub.add_parser("models", help="list the model kinds and their settings")

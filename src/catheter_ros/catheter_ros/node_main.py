@@ -150,3 +150,21 @@ def run_node(
         poll_s=poll_s,
         events_executor=events_executor,
     )
+
+
+def run_node_as_main(
+    factory: Callable[[], Node],
+    args: list[str] | None = None,
+    *,
+    until: Callable[[Node], bool] | None = None,
+    poll_s: float = 0.1,
+    events_executor: bool = False,
+) -> None:
+    """A node's ``main``: :func:`run_node`, and a non-zero exit code leaves as ``SystemExit``.
+
+    Every node's entry point ended the same way; one helper keeps their exit codes alike
+    (0 returns normally, so a console script exits 0; 2 for a refused start-up).
+    """
+    code = run_node(factory, args, until=until, poll_s=poll_s, events_executor=events_executor)
+    if code:
+        raise SystemExit(code)

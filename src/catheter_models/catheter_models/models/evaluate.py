@@ -15,14 +15,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from catheter_models.contract import MAX_PRESSURE_PA
 from catheter_models.metrics import ErrorMetrics, compute_metrics
 from catheter_models.models.base import FloatArray, Model, Recording, Stream
 from catheter_models.plant import Plant, PlantConfig
 from catheter_models.signals import SignalSpec, get_preset
 
 # The compensator node's defaults (catheter_control.compensator_node): the same limits here
-# keep a benchmark honest about what the node would have commanded.
-DEFAULT_MAX_PRESSURE_PA = 3.0e5
+# keep a benchmark honest about what the node would have commanded. The ceiling is the
+# contract's, which the node's default reads too.
+DEFAULT_MAX_PRESSURE_PA = MAX_PRESSURE_PA
 DEFAULT_MAX_SLEW_PA_PER_S = 20.0e5
 
 

@@ -19,6 +19,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Final
 
+from catheter_models.contract import MAX_PRESSURE_PA, SENSOR_RATE_HZ
 from catheter_models.errors import ParameterError
 from catheter_models.units import AMBIENT_PRESSURE_PA, deg_to_rad
 
@@ -240,7 +241,7 @@ RIG_PARAMS: Final[tuple[ParamSpec, ...]] = (
     ),
     ParamSpec(
         "valve_max_pressure_pa",
-        3.0e5,
+        MAX_PRESSURE_PA,
         0.5e5,
         10.0e5,
         "highest gauge pressure the valve can deliver; commands are clipped to it [Pa]",
@@ -269,7 +270,7 @@ RIG_PARAMS: Final[tuple[ParamSpec, ...]] = (
     ParamSpec("laser_noise_m", 0.02e-3, 0.0, 1e-3, "laser distance noise, std [m]"),
     ParamSpec("pressure_noise_pa", 300.0, 0.0, 1e4, "pressure transmitter noise, std [Pa]"),
     ParamSpec("ambient_pressure_pa", AMBIENT_PRESSURE_PA, 5.0e4, 1.2e5, "ambient pressure [Pa]"),
-    ParamSpec("sample_rate_hz", 250.0, 10.0, 5000.0, "sensor sample rate [Hz]"),
+    ParamSpec("sample_rate_hz", SENSOR_RATE_HZ, 10.0, 5000.0, "sensor sample rate [Hz]"),
 )
 """Parameters of the rig that are always present (not effects)."""
 
