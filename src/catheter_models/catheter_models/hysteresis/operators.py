@@ -74,11 +74,6 @@ G_INPUT_WEIGHT = 5  # q (eq. 9.12) or q' = 1/q (eq. 9.20)
 G_HEADER = 6
 # then: thresholds[n] (r_i, eq. 9.16, or r'_i, eq. 9.19), weights[n] (p(r_i), eq. 9.15, or p'_i)
 
-N_DRDPI_PARAMS = 12
-"""alpha0, alpha1, alpha2, beta0, beta1, beta2, dp, dn, zeta, beta, a0, g0 (Table 5.1)."""
-N_GPI_PARAMS = 8
-"""c0, c1, c2, c3, beta, rho, tau, q (Table 9.1)."""
-
 ENVELOPE_MARGIN = 1e-9
 """γ⁻¹ (eq. 9.21) saturates at tanh argument ±atanh(1 - margin) outside γ's range."""
 

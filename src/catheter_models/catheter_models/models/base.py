@@ -369,6 +369,14 @@ class Model(ABC):
         return model
 
 
+def saved_rate_hz(manifest: Manifest, kind: str) -> float:
+    """The rate a saved model was fitted at, from its manifest; ModelError if it is missing."""
+    rate = manifest.metrics.get("rate_hz")
+    if not isinstance(rate, (int, float)):
+        raise ModelError(f"{kind} manifest metrics lack a valid 'rate_hz'")
+    return float(rate)
+
+
 def as_input(values: npt.ArrayLike, name: str = "input") -> FloatArray:
     """A finite 1-D float64 array, or SignalError naming the first bad sample."""
     arr = np.ascontiguousarray(values, dtype=np.float64)

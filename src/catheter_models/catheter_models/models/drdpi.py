@@ -45,7 +45,6 @@ and Table 5.1's α0 = a1 e^{β0} then reads large (thousands) while a1 is ~10 de
 from __future__ import annotations
 
 import itertools
-import json
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -68,6 +67,7 @@ from catheter_models.models.base import (
     Recording,
     as_input,
     check_finite_step,
+    saved_rate_hz,
 )
 from catheter_models.models.identify import (
     Budget,
@@ -76,24 +76,8 @@ from catheter_models.models.identify import (
     identify,
     stack_recordings,
 )
-from catheter_models.models.params import ParameterSet
+from catheter_models.models.params import ParameterSet, ParamsFile
 from catheter_models.units import deg_to_rad, pa_to_bar, rad_to_deg
-
-PARAM_NAMES: Final = (
-    "alpha0",
-    "alpha1",
-    "alpha2",
-    "beta0",
-    "beta1",
-    "beta2",
-    "dp",
-    "dn",
-    "zeta",
-    "beta",
-    "a0",
-    "g0",
-)
-"""Table 5.1's parameters, in its order (the order of every parameter vector here)."""
 
 FORWARD_UNITS: Final[Mapping[str, str]] = {
     "alpha0": "deg/bar",
@@ -245,6 +229,14 @@ class DRDPIParams(ParameterSet):
     label = "DRDPI"
     table = "Table 5.1"
     validity = _VALIDITY
+
+
+PARAM_NAMES: Final = DRDPIParams.names()
+"""Table 5.1's parameters, in its order (the order of every parameter vector here); the
+dataclass's fields are the one place the order is written."""
+
+DRDPI_PARAMS_FILE: Final = ParamsFile(PARAMS_FILE, PARAMS_FORMAT, DRDPIParams)
+"""The parameters file of every DRDPI-structure model (the DRDPI's and the IDRDPI's)."""
 
 
 def rate_alpha(rate_filter_s: float, rate_hz: float) -> float:
@@ -622,7 +614,7 @@ class DRDPI(Model):
 
     def _payload(self) -> dict[str, bytes]:
         self._coef()
-        return {PARAMS_FILE: params_json(self.params_, FORWARD_UNITS, self._structure())}
+        return {PARAMS_FILE: DRDPI_PARAMS_FILE.dump(self.params_, FORWARD_UNITS, self._structure())}
 
     def _structure(self) -> dict[str, Any]:
         return {
@@ -633,54 +625,21 @@ class DRDPI(Model):
 
     @classmethod
     def _from_payload(cls, manifest: Manifest, payload: Mapping[str, bytes]) -> Self:
-        params, structure = read_params_json(payload, kind=cls.kind)
+        params, structure = DRDPI_PARAMS_FILE.read(payload, kind=cls.kind)
         settings = dict(manifest.metrics.get("settings", {}))
         settings.update(structure)
         try:
             model = cls(**settings)
         except (TypeError, ValueError) as exc:
             raise ModelError(f"{cls.kind} manifest settings are malformed: {exc}") from None
-        rate = manifest.metrics.get("rate_hz")
-        if not isinstance(rate, (int, float)):
-            raise ModelError(f"{cls.kind} manifest metrics lack a valid 'rate_hz'")
-        model._set_params(params, float(rate))
+        model._set_params(params, saved_rate_hz(manifest, cls.kind))
         return model
-
-
-def params_json(
-    params: DRDPIParams, units: Mapping[str, str], structure: Mapping[str, Any]
-) -> bytes:
-    """The parameters file of a DRDPI-structure model: values, units and structure, as JSON."""
-    doc = {
-        "format": PARAMS_FORMAT,
-        "params": params.to_dict(),
-        "units": dict(units),
-        "structure": dict(structure),
-    }
-    return (json.dumps(doc, indent=2, sort_keys=False) + "\n").encode()
-
-
-def read_params_json(payload: Mapping[str, bytes], kind: str) -> tuple[DRDPIParams, dict[str, Any]]:
-    """Parse :func:`params_json`'s file; ModelError if it is missing or malformed."""
-    raw_bytes = payload.get(PARAMS_FILE)
-    if raw_bytes is None:
-        raise ModelError(f"{kind} model directory lacks {PARAMS_FILE}")
-    try:
-        doc = json.loads(raw_bytes)
-        if doc.get("format") != PARAMS_FORMAT:
-            raise ModelError(
-                f"{PARAMS_FILE} has format {doc.get('format')!r}, expected {PARAMS_FORMAT!r}"
-            )
-        params = DRDPIParams.from_dict(doc["params"])
-        structure = dict(doc["structure"])
-    except (ValueError, KeyError, TypeError, AttributeError) as exc:
-        raise ModelError(f"{kind}: {PARAMS_FILE} is malformed: {exc}") from None
-    return params, structure
 
 
 __all__ = [
     "DEFAULT_BOUNDS",
     "DRDPI",
+    "DRDPI_PARAMS_FILE",
     "FORWARD_UNITS",
     "PARAM_NAMES",
     "SEARCH_NAMES",

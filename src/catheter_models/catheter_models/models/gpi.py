@@ -17,7 +17,6 @@ inverse's plays at the forward model's output at rest, so inverse(forward(0)) = 
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from collections.abc import Mapping, Sequence
@@ -40,6 +39,7 @@ from catheter_models.models.base import (
     Recording,
     as_input,
     check_finite_step,
+    saved_rate_hz,
 )
 from catheter_models.models.identify import (
     Budget,
@@ -48,11 +48,8 @@ from catheter_models.models.identify import (
     identify,
     stack_recordings,
 )
-from catheter_models.models.params import ParameterSet
+from catheter_models.models.params import ParameterSet, ParamsFile
 from catheter_models.units import bar_to_pa, deg_to_rad, pa_to_bar, rad_to_deg
-
-GPI_PARAM_NAMES: Final = ("c0", "c1", "c2", "c3", "beta", "rho", "tau", "q")
-"""Table 9.1's parameters, in its order."""
 
 GPI_UNITS: Final[Mapping[str, str]] = {
     "c0": "g",
@@ -138,6 +135,13 @@ class GPIParams(ParameterSet):
     label = "GPI"
     table = "Table 9.1"
     validity = _VALIDITY
+
+
+GPI_PARAM_NAMES: Final = GPIParams.names()
+"""Table 9.1's parameters, in its order (the dataclass's fields)."""
+
+GPI_FILE: Final = ParamsFile(GPI_PARAMS_FILE, GPI_PARAMS_FORMAT, GPIParams)
+"""The GPI's parameters file."""
 
 
 def gpi_coefficients(params: GPIParams, n_play: int) -> FloatArray:
@@ -402,42 +406,26 @@ class GPI(Model):
 
     def _payload(self) -> dict[str, bytes]:
         self._coefs()
-        doc = {
-            "format": GPI_PARAMS_FORMAT,
-            "params": self.params_.to_dict(),
-            "units": dict(GPI_UNITS),
-            "structure": {"n_play": self.n_play},
-        }
-        return {GPI_PARAMS_FILE: (json.dumps(doc, indent=2) + "\n").encode()}
+        structure = {"n_play": self.n_play}
+        return {GPI_PARAMS_FILE: GPI_FILE.dump(self.params_, GPI_UNITS, structure)}
 
     @classmethod
     def _from_payload(cls, manifest: Manifest, payload: Mapping[str, bytes]) -> Self:
-        raw = payload.get(GPI_PARAMS_FILE)
-        if raw is None:
-            raise ModelError(f"gpi model directory lacks {GPI_PARAMS_FILE}")
+        params, structure = GPI_FILE.read(payload, kind=cls.kind)
         try:
-            doc = json.loads(raw)
-            if doc.get("format") != GPI_PARAMS_FORMAT:
-                raise ModelError(
-                    f"{GPI_PARAMS_FILE} has format {doc.get('format')!r}, "
-                    f"expected {GPI_PARAMS_FORMAT!r}"
-                )
-            params = GPIParams.from_dict(doc["params"])
             settings = dict(manifest.metrics.get("settings", {}))
-            settings.update(dict(doc["structure"]))
+            settings.update(structure)
             model = cls(**settings)
         except (ValueError, KeyError, TypeError, AttributeError) as exc:
             raise ModelError(f"gpi: {GPI_PARAMS_FILE} is malformed: {exc}") from None
-        rate = manifest.metrics.get("rate_hz")
-        if not isinstance(rate, (int, float)):
-            raise ModelError("gpi manifest metrics lack a valid 'rate_hz'")
-        model._set_params(params, float(rate))
+        model._set_params(params, saved_rate_hz(manifest, cls.kind))
         return model
 
 
 __all__ = [
     "GPI",
     "GPI_DEFAULT_BOUNDS",
+    "GPI_FILE",
     "GPI_PARAM_NAMES",
     "GPI_SEARCH_NAMES",
     "GPI_UNITS",

@@ -68,10 +68,12 @@ from catheter_models.models.base import (
     NotFittedError,
     Recording,
     as_input,
+    saved_rate_hz,
 )
 from catheter_models.models.drdpi import (
     DEFAULT_BOUNDS,
     DRDPI,
+    DRDPI_PARAMS_FILE,
     FORWARD_UNITS,
     PARAMS_FILE,
     SEARCH_NAMES,
@@ -80,8 +82,6 @@ from catheter_models.models.drdpi import (
     DRDPIProblem,
     chain_coefficients,
     identify_chain,
-    params_json,
-    read_params_json,
     run_chain,
 )
 from catheter_models.models.gpi import GPI, GPIParams
@@ -549,13 +549,13 @@ class IDRDPI(Model):
             "gpis": [{"frequency_hz": f, "params": p.to_dict()} for f, p in self.gpis_],
         }
         return {
-            PARAMS_FILE: params_json(self.params_, units, structure),
+            PARAMS_FILE: DRDPI_PARAMS_FILE.dump(self.params_, units, structure),
             IDRDPI_META_FILE: (json.dumps(meta, indent=2) + "\n").encode(),
         }
 
     @classmethod
     def _from_payload(cls, manifest: Manifest, payload: Mapping[str, bytes]) -> Self:
-        params, structure_settings = read_params_json(payload, kind=cls.kind)
+        params, structure_settings = DRDPI_PARAMS_FILE.read(payload, kind=cls.kind)
         raw_meta = payload.get(IDRDPI_META_FILE)
         if raw_meta is None:
             raise ModelError(f"idrdpi model directory lacks {IDRDPI_META_FILE}")
@@ -579,11 +579,9 @@ class IDRDPI(Model):
             model = cls(**settings)
         except (ValueError, KeyError, TypeError, AttributeError) as exc:
             raise ModelError(f"idrdpi: model files are malformed: {exc}") from None
-        rate = manifest.metrics.get("rate_hz")
-        if not isinstance(rate, (int, float)):
-            raise ModelError("idrdpi manifest metrics lack a valid 'rate_hz'")
+        rate = saved_rate_hz(manifest, cls.kind)
         model.gpis_ = gpis
-        model._set_params(params, structure, float(rate))
+        model._set_params(params, structure, rate)
         return model
 
 

@@ -1,22 +1,25 @@
-"""Named, range-checked parameter sets of the analytic models (Table 5.1, Table 9.1).
+"""Named, range-checked parameter sets of the analytic models (Tables 5.1, 9.1) and their file.
 
 One implementation of what every parameter table needs: each value checked against its
 physical range when the set is built (the message names the parameter, the range and why),
-and round trips to a vector (for the optimiser) and to a mapping (for the JSON weight file)
-that refuse missing or unknown names.
+round trips to a vector (for the optimiser) and to a mapping that refuse missing or unknown
+names, and the one JSON file a model directory keeps them in (:class:`ParamsFile`: format tag,
+values, units, structure). The DRDPI, the GPI and the IDRDPI all save and load through it.
 """
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
-from typing import Any, ClassVar, Self
+from typing import Any, ClassVar, Generic, Self, TypeVar
 
 import numpy as np
 import numpy.typing as npt
 
 from catheter_models.errors import ParameterError
+from catheter_models.models.base import ModelError
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -88,3 +91,48 @@ class ParameterSet:
                 f"expected exactly {list(names)}"
             )
         return cls(**{n: raw[n] for n in names})
+
+
+P = TypeVar("P", bound=ParameterSet)
+
+
+@dataclass(frozen=True)
+class ParamsFile(Generic[P]):
+    """The JSON file of a model's parameter set: ``format``, ``params``, ``units``, ``structure``.
+
+    Attributes:
+        name: File name in the model directory (e.g. ``"drdpi_params.json"``).
+        format: Format tag written into the file and required when reading it.
+        params_type: The parameter set the file holds.
+    """
+
+    name: str
+    format: str
+    params_type: type[P]
+
+    def dump(self, params: P, units: Mapping[str, str], structure: Mapping[str, Any]) -> bytes:
+        """The file's bytes: values, units and structure, as indented JSON."""
+        doc = {
+            "format": self.format,
+            "params": params.to_dict(),
+            "units": dict(units),
+            "structure": dict(structure),
+        }
+        return (json.dumps(doc, indent=2) + "\n").encode()
+
+    def read(self, payload: Mapping[str, bytes], kind: str) -> tuple[P, dict[str, Any]]:
+        """Parameters and structure from a verified payload; ModelError if missing or malformed."""
+        raw_bytes = payload.get(self.name)
+        if raw_bytes is None:
+            raise ModelError(f"{kind} model directory lacks {self.name}")
+        try:
+            doc = json.loads(raw_bytes)
+            if doc.get("format") != self.format:
+                raise ModelError(
+                    f"{self.name} has format {doc.get('format')!r}, expected {self.format!r}"
+                )
+            params = self.params_type.from_dict(doc["params"])
+            structure = dict(doc["structure"])
+        except (ValueError, KeyError, TypeError, AttributeError) as exc:
+            raise ModelError(f"{kind}: {self.name} is malformed: {exc}") from None
+        return params, structure
