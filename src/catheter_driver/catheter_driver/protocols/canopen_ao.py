@@ -9,6 +9,12 @@ A module only acts on PDOs in the Operational state, entered by NMT "start remot
 Default scaling: a 0-10 V module (raw 0..32767 = 0..10 V) driving a valve whose 0-10 V input
 spans 0..6 bar gauge, so raw 32767 = 6e5 Pa. Set ``full_scale_pa`` to the valve's range (the
 thesis's Festo regulator spans 0-3 bar: ``full_scale_pa=3e5``).
+
+This is standard CANopen (CiA 301 NMT and PDOs; the output is the CiA 401 object 0x6411),
+which off-the-shelf analog-output modules speak as delivered: nothing needs flashing. The
+module must be configured (over SDO or with its vendor's tool), though, because CiA 401's
+default mapping differs from the one used here: docs/protocols/canopen_valve.md says what
+to set.
 """
 
 from __future__ import annotations

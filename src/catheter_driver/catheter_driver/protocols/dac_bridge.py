@@ -1,5 +1,13 @@
 """A serial DAC bridge: a microcontroller whose DAC drives the valve's 0-10 V input.
 
+This protocol was designed by this project; no firmware speaks it yet. A rig that uses the
+``dac_serial`` backend needs a microcontroller flashed with firmware that implements it,
+including the fail-safe (docs/protocols/dac_bridge.md is the specification to build it
+from); only the emulator (``emulators/dac_bridge.py``) speaks it today. The Keller bus
+(:mod:`~catheter_driver.protocols.keller`) and CANopen
+(:mod:`~catheter_driver.protocols.canopen_ao`) are, by contrast, protocols that
+off-the-shelf devices already speak.
+
 Frame (both directions): ``0xA5, cmd, len, payload[len], CRC-8`` with the CRC (polynomial
 0x07, init 0x00) over ``cmd, len, payload``.
 

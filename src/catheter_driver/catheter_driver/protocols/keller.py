@@ -14,6 +14,10 @@ CRC-16 is the Modbus register (reflected polynomial 0xA001, init 0xFFFF), but Ke
 the **high byte first**: the opposite order to Modbus RTU. A device must be initialised
 with F48 after power-up; until then it answers F73 with exception 32. Address 250 is the
 transparent address: whatever device is on the line answers with its own address.
+
+This is KELLER's own published bus protocol (of which only F48 and F73 are implemented):
+the transmitters speak it as delivered, so nothing needs flashing, only the address and
+baud rate set (docs/protocols/keller.md).
 """
 
 from __future__ import annotations

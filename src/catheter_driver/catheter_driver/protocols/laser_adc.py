@@ -1,5 +1,13 @@
 """Frames of the ADC bridge that samples the laser's analog output at 250 Hz.
 
+This protocol (serial and CAN framing) was designed by this project; no firmware speaks it
+yet. A rig that uses the ``adc_serial`` or ``adc_can`` backend needs a microcontroller with
+an ADC flashed with firmware that implements it (docs/protocols/laser_adc.md is the
+specification to build it from); only the emulator (``emulators/laser_adc.py``) speaks it
+today. The Keller bus (:mod:`~catheter_driver.protocols.keller`) and CANopen
+(:mod:`~catheter_driver.protocols.canopen_ao`) are, by contrast, protocols that
+off-the-shelf devices already speak.
+
 Serial frame, 7 bytes, one sample:
 
 ====== ======= ====================================================
