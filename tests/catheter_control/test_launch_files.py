@@ -21,6 +21,7 @@ from typing import Any
 import pytest
 import yaml
 
+import catheter_control
 from catheter_control.bringup import (
     LIFECYCLE_MODULES,
     SIM_COMPENSATOR_PARAMS,
@@ -31,6 +32,7 @@ from catheter_control.bringup import (
 
 LAUNCH_DIR = Path(__file__).resolve().parents[2] / "src/catheter_control/launch"
 CONFIGURE, ACTIVATE = 1, 3  # lifecycle_msgs/msg/Transition ids
+SHARED = "catheter_control.launch_common"
 
 
 # -- fakes of launch and launch_ros -----------------------------------------------------------
@@ -206,6 +208,12 @@ def run_launch_file(monkeypatch: pytest.MonkeyPatch) -> Iterator[Any]:
         resolve = modules.pop("resolve").resolve  # type: ignore[attr-defined]
         for name, module in modules.items():
             monkeypatch.setitem(sys.modules, name, module)
+        # The launch files share catheter_control.launch_common, which imports launch at its
+        # top: import it afresh against these fakes, and take it away again afterwards
+        # (monkeypatch puts back what was there before: nothing, where launch is not installed).
+        monkeypatch.setitem(sys.modules, SHARED, None)
+        monkeypatch.delitem(sys.modules, SHARED)
+        monkeypatch.setattr(catheter_control, "launch_common", None, raising=False)
         spec = importlib.util.spec_from_file_location(filename, LAUNCH_DIR / filename)
         assert spec is not None and spec.loader is not None
         module = importlib.util.module_from_spec(spec)

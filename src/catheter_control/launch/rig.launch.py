@@ -16,67 +16,37 @@ first run (docs/rig.md).
 
 On Ctrl-C, launch signals every node at once; the compensator ramps down if the valve driver
 outlives it, and the valve driver vents on shutdown and by its watchdog whatever the order.
+
+The arguments and nodes this file shares with ``sim.launch.py`` are in
+catheter_control/launch_common.py.
 """
 
-import time
-from pathlib import Path
-
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, EmitEvent, RegisterEventHandler
-from launch.conditions import IfCondition
-from launch.events import matches_action
+from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
-from launch_ros.actions import LifecycleNode, Node
-from launch_ros.event_handlers import OnStateTransition
-from launch_ros.events.lifecycle import ChangeState
-from launch_ros.parameter_descriptions import ParameterValue
+from launch_ros.actions import LifecycleNode
 from launch_ros.substitutions import FindPackageShare
-from lifecycle_msgs.msg import Transition
 
-
-def configure_then_activate(node: LifecycleNode) -> list:
-    """Configure ``node`` at launch, and activate it when it reaches inactive from configuring.
-
-    ``start_state`` matters: a later deactivate (active -> inactive) must not re-activate it.
-    """
-    return [
-        RegisterEventHandler(
-            OnStateTransition(
-                target_lifecycle_node=node,
-                start_state="configuring",
-                goal_state="inactive",
-                entities=[
-                    EmitEvent(
-                        event=ChangeState(
-                            lifecycle_node_matcher=matches_action(node),
-                            transition_id=Transition.TRANSITION_ACTIVATE,
-                        )
-                    )
-                ],
-            )
-        ),
-        EmitEvent(
-            event=ChangeState(
-                lifecycle_node_matcher=matches_action(node),
-                transition_id=Transition.TRANSITION_CONFIGURE,
-            )
-        ),
-    ]
+from catheter_control.launch_common import (
+    compensator_arguments,
+    compensator_node,
+    configure_then_activate,
+    graph_arguments,
+    namespace_argument,
+    recorder_node,
+    rt_priority_parameter,
+    tip_tf_node,
+)
 
 
 def generate_launch_description() -> LaunchDescription:
     """Arguments, then the recorder, the two drivers and the compensator, in start order."""
-    stamp = time.strftime("%Y%m%d-%H%M%S")
-    default_bag = str(Path.cwd() / "runs" / f"{stamp}-rig" / "bag")
     config = PathJoinSubstitution([FindPackageShare("catheter_driver"), "config"])
     namespace = LaunchConfiguration("namespace")
-    rt_priority = ParameterValue(LaunchConfiguration("rt_priority"), value_type=int)
+    rt_priority = rt_priority_parameter()
     arguments = [
-        DeclareLaunchArgument(
-            "namespace",
-            default_value="catheter",
-            description="namespace of every node (the shipped driver configs are keyed for "
-            "catheter)",
+        namespace_argument(
+            "namespace of every node (the shipped driver configs are keyed for catheter)"
         ),
         DeclareLaunchArgument(
             "valve_config",
@@ -90,92 +60,17 @@ def generate_launch_description() -> LaunchDescription:
             description="laser_angle parameter file (laser_angle_adc_serial.yaml or "
             "laser_angle_adc_can.yaml in share/catheter_driver/config, or your own)",
         ),
-        DeclareLaunchArgument(
-            "compensator",
-            default_value="clstm",
-            choices=["clstm", "idrdpi", "none"],
-            description="feedforward compensator (none: static inverse, no hysteresis model)",
+        *compensator_arguments(
+            model_dir_description="model directory for the compensator ('' = the shipped one, "
+            "fitted on the simulated rig); hash-checked on load",
+            require_tip_angle_default="false",
+            require_tip_angle_description="compensator stops when the laser's tip/angle goes stale",
+            accept_trajectories_description="false: the compensator does not subscribe to "
+            "trajectory, so nothing on the network can make it move the catheter",
         ),
-        DeclareLaunchArgument(
-            "model_dir",
-            default_value="",
-            description="model directory for the compensator ('' = the shipped one, fitted "
-            "on the simulated rig); hash-checked on load",
-        ),
-        DeclareLaunchArgument(
-            "control_rate_hz", default_value="250.0", description="control loop rate [Hz]"
-        ),
-        DeclareLaunchArgument(
-            "feedback",
-            default_value="none",
-            choices=["none", "pi"],
-            description="feedback on tip/angle beside the compensator (pi: gains from "
-            "feedback_gains; tip/angle is then required)",
-        ),
-        DeclareLaunchArgument(
-            "feedback_gains",
-            default_value="",
-            description="feedback.json from catheter-lab tune ('' = the one in model_dir, or "
-            "the shipped one, tuned on the simulated rig)",
-        ),
-        DeclareLaunchArgument(
-            "require_tip_angle",
-            default_value="false",
-            choices=["true", "false"],
-            description="compensator stops when the laser's tip/angle goes stale",
-        ),
-        DeclareLaunchArgument(
-            "accept_trajectories",
-            default_value="true",
-            choices=["true", "false"],
-            description="false: the compensator does not subscribe to trajectory, so nothing "
-            "on the network can make it move the catheter",
-        ),
-        DeclareLaunchArgument(
-            "rt_priority",
-            default_value="50",
-            description="SCHED_FIFO priority of the loops (0: normal scheduling)",
-        ),
-        DeclareLaunchArgument(
-            "record", default_value="true", choices=["true", "false"], description="run recorder"
-        ),
-        DeclareLaunchArgument(
-            "tf",
-            default_value="true",
-            choices=["true", "false"],
-            description="run tip_tf: robot_description, joint_states and /tf from tip/angle",
-        ),
-        DeclareLaunchArgument(
-            "bag_path",
-            default_value=default_bag,
-            description="new bag directory (must not exist)",
-        ),
+        *graph_arguments("rig"),
     ]
-    recorder = Node(
-        package="catheter_control",
-        executable="recorder",
-        name="recorder",
-        namespace=namespace,
-        condition=IfCondition(LaunchConfiguration("record")),
-        parameters=[
-            {
-                "bag_path": ParameterValue(LaunchConfiguration("bag_path"), value_type=str),
-                # A JSON object as a string parameter: typed, or launch would parse it as YAML.
-                "custom_data": ParameterValue(
-                    [
-                        '{"source": "rig.launch.py", "hardware": "rig (valve_driver, '
-                        'laser_angle)", "compensator": "',
-                        LaunchConfiguration("compensator"),
-                        '", "model_dir": "',
-                        LaunchConfiguration("model_dir"),
-                        '"}',
-                    ],
-                    value_type=str,
-                ),
-            }
-        ],
-        output="screen",
-    )
+    recorder = recorder_node(namespace, "rig.launch.py", "rig (valve_driver, laser_angle)")
     valve_driver = LifecycleNode(
         package="catheter_driver",
         executable="valve_driver",
@@ -192,41 +87,8 @@ def generate_launch_description() -> LaunchDescription:
         parameters=[LaunchConfiguration("laser_config"), {"rt_priority": rt_priority}],
         output="screen",
     )
-    compensator = LifecycleNode(
-        package="catheter_control",
-        executable="compensator",
-        name="compensator",
-        namespace=namespace,
-        parameters=[
-            {
-                "compensator": ParameterValue(LaunchConfiguration("compensator"), value_type=str),
-                "model_dir": ParameterValue(LaunchConfiguration("model_dir"), value_type=str),
-                "feedback": ParameterValue(LaunchConfiguration("feedback"), value_type=str),
-                "feedback_gains": ParameterValue(
-                    LaunchConfiguration("feedback_gains"), value_type=str
-                ),
-                "control_rate_hz": ParameterValue(
-                    LaunchConfiguration("control_rate_hz"), value_type=float
-                ),
-                "require_tip_angle": ParameterValue(
-                    LaunchConfiguration("require_tip_angle"), value_type=bool
-                ),
-                "accept_trajectories": ParameterValue(
-                    LaunchConfiguration("accept_trajectories"), value_type=bool
-                ),
-                "rt_priority": rt_priority,
-            }
-        ],
-        output="screen",
-    )
-    tip_tf = Node(
-        package="catheter_control",
-        executable="tip_tf",
-        name="tip_tf",
-        namespace=namespace,
-        condition=IfCondition(LaunchConfiguration("tf")),
-        output="screen",
-    )
+    compensator = compensator_node(namespace, rt_priority)
+    tip_tf = tip_tf_node(namespace)
     return LaunchDescription(
         [
             *arguments,

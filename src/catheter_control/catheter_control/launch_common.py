@@ -1,0 +1,227 @@
+"""What ``sim.launch.py`` and ``rig.launch.py`` share: arguments, nodes, lifecycle wiring.
+
+The two launch files start the same recorder, compensator and ``tip_tf`` beside different
+drivers (the simulated rig, or the real valve driver and laser). Their shared arguments and
+nodes live here so the two cannot drift apart, and so the compensator's choices and rate
+come from the code that defines them (:mod:`catheter_control.models`,
+:mod:`catheter_models.contract`) rather than from a copy typed into each file.
+
+It is its own module because it imports the ROS ``launch`` packages at its top, which only a
+launch process has: nothing else in catheter_control imports it.
+tests/catheter_control/test_launch_files.py runs both launch files, and so this module,
+against stand-ins for ``launch`` and ``launch_ros``.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+from launch.actions import DeclareLaunchArgument, EmitEvent, RegisterEventHandler
+from launch.conditions import IfCondition
+from launch.events import matches_action
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import LifecycleNode, Node
+from launch_ros.event_handlers import OnStateTransition
+from launch_ros.events.lifecycle import ChangeState
+from launch_ros.parameter_descriptions import ParameterValue
+from lifecycle_msgs.msg import Transition
+
+from catheter_control.models import COMPENSATORS, DEFAULT_COMPENSATOR, FEEDBACKS
+from catheter_models.contract import CONTROL_RATE_HZ
+
+
+def configure_then_activate(node: LifecycleNode) -> list[Any]:
+    """Configure ``node`` at launch, and activate it when it reaches inactive from configuring.
+
+    ``start_state`` matters: a later deactivate (active -> inactive) must not re-activate it.
+    """
+    return [
+        RegisterEventHandler(
+            OnStateTransition(
+                target_lifecycle_node=node,
+                start_state="configuring",
+                goal_state="inactive",
+                entities=[
+                    EmitEvent(
+                        event=ChangeState(
+                            lifecycle_node_matcher=matches_action(node),
+                            transition_id=Transition.TRANSITION_ACTIVATE,
+                        )
+                    )
+                ],
+            )
+        ),
+        EmitEvent(
+            event=ChangeState(
+                lifecycle_node_matcher=matches_action(node),
+                transition_id=Transition.TRANSITION_CONFIGURE,
+            )
+        ),
+    ]
+
+
+def namespace_argument(description: str = "namespace of every node") -> DeclareLaunchArgument:
+    """``namespace``: where every node of the graph lives (``catheter``)."""
+    return DeclareLaunchArgument("namespace", default_value="catheter", description=description)
+
+
+def compensator_arguments(
+    *,
+    model_dir_description: str,
+    require_tip_angle_default: str,
+    require_tip_angle_description: str,
+    accept_trajectories_description: str,
+) -> list[DeclareLaunchArgument]:
+    """The compensator's arguments, in the order ``--show-args`` lists them.
+
+    The defaults that differ between the simulated and the real rig (whether the laser is
+    required) and the descriptions that say so are the caller's.
+    """
+    return [
+        DeclareLaunchArgument(
+            "compensator",
+            default_value=DEFAULT_COMPENSATOR,
+            # Alphabetical, as the launch files have always listed them.
+            choices=sorted(COMPENSATORS),
+            description="feedforward compensator (none: static inverse, no hysteresis model)",
+        ),
+        DeclareLaunchArgument("model_dir", default_value="", description=model_dir_description),
+        DeclareLaunchArgument(
+            "control_rate_hz",
+            default_value=str(CONTROL_RATE_HZ),
+            description="control loop rate [Hz]",
+        ),
+        DeclareLaunchArgument(
+            "feedback",
+            default_value="none",
+            choices=list(FEEDBACKS),
+            description="feedback on tip/angle beside the compensator (pi: gains from "
+            "feedback_gains; tip/angle is then required)",
+        ),
+        DeclareLaunchArgument(
+            "feedback_gains",
+            default_value="",
+            description="feedback.json from catheter-lab tune ('' = the one in model_dir, or "
+            "the shipped one, tuned on the simulated rig)",
+        ),
+        DeclareLaunchArgument(
+            "require_tip_angle",
+            default_value=require_tip_angle_default,
+            choices=["true", "false"],
+            description=require_tip_angle_description,
+        ),
+        DeclareLaunchArgument(
+            "accept_trajectories",
+            default_value="true",
+            choices=["true", "false"],
+            description=accept_trajectories_description,
+        ),
+    ]
+
+
+def graph_arguments(run_label: str) -> list[DeclareLaunchArgument]:
+    """Scheduling, what else runs, and where the bag goes (``runs/<time>-<run_label>/bag``)."""
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    default_bag = str(Path.cwd() / "runs" / f"{stamp}-{run_label}" / "bag")
+    return [
+        DeclareLaunchArgument(
+            "rt_priority",
+            default_value="50",
+            description="SCHED_FIFO priority of the loops (0: normal scheduling)",
+        ),
+        DeclareLaunchArgument(
+            "record", default_value="true", choices=["true", "false"], description="run recorder"
+        ),
+        DeclareLaunchArgument(
+            "tf",
+            default_value="true",
+            choices=["true", "false"],
+            description="run tip_tf: robot_description, joint_states and /tf from tip/angle",
+        ),
+        DeclareLaunchArgument(
+            "bag_path",
+            default_value=default_bag,
+            description="new bag directory (must not exist)",
+        ),
+    ]
+
+
+def rt_priority_parameter() -> ParameterValue:
+    """The ``rt_priority`` argument as the integer parameter the loop nodes declare."""
+    return ParameterValue(LaunchConfiguration("rt_priority"), value_type=int)
+
+
+def recorder_node(namespace: LaunchConfiguration, source: str, hardware: str) -> Node:
+    """The recorder, if ``record``; the bag's metadata names the launch file and the rig.
+
+    ``source`` and ``hardware`` are plain text (no quotes) spliced into a JSON object.
+    """
+    return Node(
+        package="catheter_control",
+        executable="recorder",
+        name="recorder",
+        namespace=namespace,
+        condition=IfCondition(LaunchConfiguration("record")),
+        parameters=[
+            {
+                "bag_path": ParameterValue(LaunchConfiguration("bag_path"), value_type=str),
+                # A JSON object as a string parameter: typed, or launch would parse it as YAML.
+                "custom_data": ParameterValue(
+                    [
+                        f'{{"source": "{source}", "hardware": "{hardware}", "compensator": "',
+                        LaunchConfiguration("compensator"),
+                        '", "model_dir": "',
+                        LaunchConfiguration("model_dir"),
+                        '"}',
+                    ],
+                    value_type=str,
+                ),
+            }
+        ],
+        output="screen",
+    )
+
+
+def compensator_node(namespace: LaunchConfiguration, rt_priority: ParameterValue) -> LifecycleNode:
+    """The compensator, with every argument of :func:`compensator_arguments` as its parameter."""
+    return LifecycleNode(
+        package="catheter_control",
+        executable="compensator",
+        name="compensator",
+        namespace=namespace,
+        parameters=[
+            {
+                "compensator": ParameterValue(LaunchConfiguration("compensator"), value_type=str),
+                "model_dir": ParameterValue(LaunchConfiguration("model_dir"), value_type=str),
+                "feedback": ParameterValue(LaunchConfiguration("feedback"), value_type=str),
+                "feedback_gains": ParameterValue(
+                    LaunchConfiguration("feedback_gains"), value_type=str
+                ),
+                "control_rate_hz": ParameterValue(
+                    LaunchConfiguration("control_rate_hz"), value_type=float
+                ),
+                "require_tip_angle": ParameterValue(
+                    LaunchConfiguration("require_tip_angle"), value_type=bool
+                ),
+                "accept_trajectories": ParameterValue(
+                    LaunchConfiguration("accept_trajectories"), value_type=bool
+                ),
+                "rt_priority": rt_priority,
+            }
+        ],
+        output="screen",
+    )
+
+
+def tip_tf_node(namespace: LaunchConfiguration) -> Node:
+    """``tip_tf``, if ``tf``: robot_description, joint_states and /tf for RViz."""
+    return Node(
+        package="catheter_control",
+        executable="tip_tf",
+        name="tip_tf",
+        namespace=namespace,
+        condition=IfCondition(LaunchConfiguration("tf")),
+        output="screen",
+    )
