@@ -54,6 +54,7 @@ from typing import Any, ClassVar, Final, Self
 import numpy as np
 import numpy.typing as npt
 
+from catheter_models.contract import SENSOR_RATE_HZ
 from catheter_models.errors import ParameterError
 from catheter_models.hysteresis import operators as op
 from catheter_models.model_dir import Manifest
@@ -510,7 +511,9 @@ class DRDPI(Model):
 
     # -- building from known parameters -----------------------------------------------------
     @classmethod
-    def from_params(cls, params: DRDPIParams, rate_hz: float = 250.0, **settings: Any) -> Self:
+    def from_params(
+        cls, params: DRDPIParams, rate_hz: float = SENSOR_RATE_HZ, **settings: Any
+    ) -> Self:
         """A fitted DRDPI with given parameters (for simulation, tests, the analytic inverse)."""
         model = cls(**settings)
         model._set_params(params, rate_hz)

@@ -26,6 +26,7 @@ from typing import Any, ClassVar, Final, Self
 import numpy as np
 import numpy.typing as npt
 
+from catheter_models.contract import SENSOR_RATE_HZ
 from catheter_models.errors import ParameterError
 from catheter_models.hysteresis import operators as op
 from catheter_models.model_dir import Manifest
@@ -309,7 +310,9 @@ class GPI(Model):
         self.seed = int(seed)
 
     @classmethod
-    def from_params(cls, params: GPIParams, rate_hz: float = 250.0, **settings: Any) -> Self:
+    def from_params(
+        cls, params: GPIParams, rate_hz: float = SENSOR_RATE_HZ, **settings: Any
+    ) -> Self:
         """A fitted GPI with given parameters."""
         model = cls(**settings)
         model._set_params(params, rate_hz)

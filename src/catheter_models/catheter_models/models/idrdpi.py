@@ -57,6 +57,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.signal import butter, sosfiltfilt
 
+from catheter_models.contract import SENSOR_RATE_HZ
 from catheter_models.errors import ParameterError
 from catheter_models.model_dir import Manifest
 from catheter_models.models.base import (
@@ -360,7 +361,7 @@ class IDRDPI(Model):
     def from_params(
         cls,
         params: DRDPIParams,
-        rate_hz: float = 250.0,
+        rate_hz: float = SENSOR_RATE_HZ,
         structure: Structure = "inverse",
         **settings: Any,
     ) -> Self:
