@@ -20,72 +20,56 @@ recording's pressure (the drive) and its measured angle, whichever way the model
 forward and an inverse model of the same bags are scored on the same samples.
 
 Everything inside is SI (rad, Pa gauge, s); text, JSON and plots show degrees and bar.
+
+This module holds the numerics and the public entry points; how a result reads
+(:mod:`.compare_text`), its figures (:mod:`.compare_plots`) and its HTML page
+(:mod:`.compare_report`) are their own modules, and :func:`write_report` is re-exported here.
 """
 
 from __future__ import annotations
 
-import html
-import json
 import math
-import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
-from typing import TYPE_CHECKING, Any, Final, Literal
+from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
 
 from catheter_models.errors import ParameterError
+from catheter_models.lab.compare_report import MAX_PLOTTED_RECORDINGS, write_report
+from catheter_models.lab.compare_text import (
+    MIXED,
+    comparison_dict,
+    comparison_text,
+    display_unit_of,
+    segment_text,
+)
 from catheter_models.metrics import (
     REGIMES,
     ErrorMetrics,
     classify_regimes,
     compute_metrics,
     metrics_by_regime,
-    smoothed_rate,
 )
 from catheter_models.models.base import Direction, Model, Recording, check_rates
-from catheter_models.units import PA_PER_BAR, rad_to_deg
-
-if TYPE_CHECKING:
-    from matplotlib.axes import Axes
-    from matplotlib.figure import Figure
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
 OutputUnit = Literal["rad", "pa"]
 
-MAX_PLOTTED_RECORDINGS: Final = 8
-"""Reports plot the first this many recordings only, so a report of many bags stays small."""
-
-MIXED: Final = "mixed"
-"""Regime name of a segment in which no single regime covers more than half the samples."""
-
-_MAX_SCATTER_POINTS: Final = 20_000
-"""Scatter plots thin to this many points: more add file size, not information."""
-
-# SI unit of a model's output -> (display unit, factor from SI to display), for people.
-_DISPLAY: Final[Mapping[str, tuple[str, float]]] = {
-    "rad": ("deg", float(rad_to_deg(1.0))),
-    "pa": ("bar", 1.0 / PA_PER_BAR),
-}
-# Any unit a caller may ask Segment.text for -> factor from the output's SI unit.
-_SCALE: Final[Mapping[str, float]] = {
-    "deg": float(rad_to_deg(1.0)),
-    "rad": 1.0,
-    "bar": 1.0 / PA_PER_BAR,
-    "Pa": 1.0,
-    "pa": 1.0,
-}
-
-
-def _scale(unit: str) -> float:
-    try:
-        return _SCALE[unit]
-    except KeyError:
-        valid = ", ".join(_SCALE)
-        raise ParameterError(f"unknown display unit {unit!r}; valid: {valid}") from None
+__all__ = [
+    "MAX_PLOTTED_RECORDINGS",
+    "MIXED",
+    "BoolArray",
+    "Comparison",
+    "FloatArray",
+    "OutputUnit",
+    "RecordingComparison",
+    "Segment",
+    "compare",
+    "write_report",
+]
 
 
 # --------------------------------------------------------------------------------------------
@@ -124,12 +108,7 @@ class Segment:
             unit: Display unit: ``deg`` or ``rad`` for forward models, ``bar`` or ``Pa`` for
                 inverse ones.
         """
-        k = _scale(unit)
-        return (
-            f"{self.recording}  {self.start_s:.2f}-{self.end_s:.2f} s  {self.regime:<11}  "
-            f"RMSE {self.rmse * k:.3g} {unit}  max |error| {self.max_abs * k:.3g} {unit}  "
-            f"(n={self.n_samples})"
-        )
+        return segment_text(self, unit)
 
 
 @dataclass
@@ -190,101 +169,20 @@ class Comparison:
     @property
     def display_unit(self) -> str:
         """Unit people read the output in: ``deg`` or ``bar``."""
-        return _DISPLAY[self.output_unit][0]
+        return display_unit_of(self.output_unit)[0]
 
     @property
     def display_scale(self) -> float:
         """Factor from the output's SI unit to :attr:`display_unit`."""
-        return _DISPLAY[self.output_unit][1]
-
-    def _mapping(self) -> str:
-        if self.direction == "forward":
-            return "forward: pressure -> angle"
-        return "inverse: angle -> pressure"
+        return display_unit_of(self.output_unit)[1]
 
     def text(self) -> str:
         """The report a person reads in the terminal (MAE = maximum absolute error)."""
-        unit, k = self.display_unit, self.display_scale
-        n = self.overall.n_samples
-        rates = sorted({r.rate_hz for r in self.recordings})
-        duration_s = sum(r.t_s.size / r.rate_hz for r in self.recordings)
-        lines = [
-            f"Compare {self.model_kind} ({self._mapping()}) with {len(self.recordings)} "
-            f"recording(s): {n} samples, {duration_s:.1f} s at "
-            + ", ".join(f"{r:g}" for r in rates)
-            + " Hz",
-            f"  RMSE  {self.overall.rmse * k:8.3f} {unit}",
-            f"  MAE   {self.overall.mae * k:8.3f} {unit}   (maximum absolute error, eq. 5.13)",
-            "  NRMSE "
-            + ("     n/a" if self.overall.nrmse is None else f"{100 * self.overall.nrmse:8.2f} %"),
-            "",
-            f"  by regime      RMSE [{unit}]  MAE [{unit}]   NRMSE  samples",
-        ]
-        for name, m in self.by_regime.items():
-            if m is None:
-                lines.append(f"    {name:<12} (too few samples)")
-                continue
-            nrmse = "    n/a" if m.nrmse is None else f"{100 * m.nrmse:6.2f} %"
-            lines.append(
-                f"    {name:<12} {m.rmse * k:10.3f}  {m.mae * k:9.3f}  {nrmse}  {m.n_samples:7d}"
-            )
-        if len(self.recordings) > 1:
-            lines += ["", "  by recording"]
-            width = max(len(r.name) for r in self.recordings)
-            for r in self.recordings:
-                lines.append(f"    {r.name:<{width}}  {r.overall.format(unit)}")
-        lines += ["", "  worst segments (time from the recording's start)"]
-        if not self.worst:
-            lines.append("    none")
-        for i, seg in enumerate(self.worst, 1):
-            lines.append(f"    {i}. {seg.text(unit)}")
-        return "\n".join(lines)
+        return comparison_text(self)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary in display units (deg or bar; NRMSE a fraction)."""
-        unit, k = self.display_unit, self.display_scale
-        return {
-            "model_kind": self.model_kind,
-            "direction": self.direction,
-            "unit": unit,
-            "overall": _metrics_dict(self.overall, unit, k),
-            "by_regime": {name: _metrics_dict(m, unit, k) for name, m in self.by_regime.items()},
-            "recordings": [
-                {
-                    "name": r.name,
-                    "rate_hz": r.rate_hz,
-                    "duration_s": r.t_s.size / r.rate_hz,
-                    "overall": _metrics_dict(r.overall, unit, k),
-                    "by_regime": {
-                        name: _metrics_dict(m, unit, k) for name, m in r.by_regime.items()
-                    },
-                }
-                for r in self.recordings
-            ],
-            "worst": [
-                {
-                    "recording": s.recording,
-                    "start_s": s.start_s,
-                    "end_s": s.end_s,
-                    "regime": s.regime,
-                    f"rmse_{unit}": s.rmse * k,
-                    f"max_abs_{unit}": s.max_abs * k,
-                    "n_samples": s.n_samples,
-                }
-                for s in self.worst
-            ],
-        }
-
-
-def _metrics_dict(m: ErrorMetrics | None, unit: str, k: float) -> dict[str, Any] | None:
-    if m is None:
-        return None
-    return {
-        f"rmse_{unit}": m.rmse * k,
-        f"mae_{unit}": m.mae * k,
-        "nrmse": m.nrmse,
-        "n_samples": m.n_samples,
-    }
+        return comparison_dict(self)
 
 
 # --------------------------------------------------------------------------------------------
@@ -439,257 +337,3 @@ def _worst_segments(
         )
     segments.sort(key=lambda s: -s.rmse)
     return segments
-
-
-# --------------------------------------------------------------------------------------------
-# Report
-# --------------------------------------------------------------------------------------------
-
-
-def _series(rc: RecordingComparison, direction: Direction) -> tuple[FloatArray, FloatArray]:
-    """(pressure [Pa], measured angle [rad]) of a recording, whichever way the model maps."""
-    if direction == "forward":
-        return rc.input_si, rc.measured_si
-    return rc.measured_si, rc.input_si
-
-
-def _file_stem(index: int, name: str) -> str:
-    """A safe, unique file name stem for a recording's plots."""
-    return f"{index:02d}_" + (re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("._") or "recording")
-
-
-def _thin(n: int) -> slice:
-    return slice(None, None, max(1, math.ceil(n / _MAX_SCATTER_POINTS)))
-
-
-def _binned(
-    x: FloatArray, y: FloatArray, n_bins: int = 20, min_count: int = 10
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Bin centres, mean and RMS of ``y`` in equal-width bins of ``x`` (sparse bins dropped)."""
-    lo, hi = float(np.min(x)), float(np.max(x))
-    if not hi > lo:
-        empty = np.zeros(0)
-        return empty, empty, empty
-    edges = np.linspace(lo, hi, n_bins + 1)
-    idx = np.clip(np.digitize(x, edges) - 1, 0, n_bins - 1)
-    count = np.bincount(idx, minlength=n_bins).astype(np.float64)
-    total = np.bincount(idx, weights=y, minlength=n_bins)
-    squares = np.bincount(idx, weights=y * y, minlength=n_bins)
-    keep = count >= min_count
-    centres = 0.5 * (edges[:-1] + edges[1:])
-    mean = total[keep] / count[keep]
-    rms = np.sqrt(squares[keep] / count[keep])
-    return centres[keep], mean, rms
-
-
-def _error_scatter(ax: Axes, x: FloatArray, err: FloatArray, xlabel: str, unit: str) -> None:
-    cut = _thin(x.size)
-    ax.scatter(x[cut], err[cut], s=3, alpha=0.15, color="tab:blue", lw=0, rasterized=True)
-    centres, mean, rms = _binned(x, err)
-    ax.plot(centres, mean, color="black", lw=1.5, label="binned mean")
-    ax.plot(centres, rms, color="tab:red", lw=1.2, ls="--", label="binned RMS")
-    ax.axhline(0.0, color="grey", lw=0.5)
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel(f"error [{unit}]")
-    ax.legend(loc="upper right", fontsize=8)
-
-
-def _plot_time(
-    comparison: Comparison, rc: RecordingComparison, segments: Sequence[tuple[int, Segment]]
-) -> Figure:
-    """Measured and predicted over time with the worst segments shaded; the error below."""
-    from matplotlib.figure import Figure
-
-    unit, k = comparison.display_unit, comparison.display_scale
-    quantity = "bend" if comparison.direction == "forward" else "pressure"
-    fig = Figure(figsize=(12, 6), layout="constrained")
-    ax_y, ax_e = fig.subplots(2, 1, sharex=True, height_ratios=[3, 2])
-    for rank, seg in segments:
-        for ax in (ax_y, ax_e):
-            ax.axvspan(seg.start_s, seg.end_s, color="tab:orange", alpha=0.25, lw=0)
-        ax_y.annotate(
-            f"#{rank}",
-            (0.5 * (seg.start_s + seg.end_s), 0.98),
-            xycoords=("data", "axes fraction"),
-            ha="center",
-            va="top",
-            fontsize=8,
-            color="tab:orange",
-        )
-    ax_y.plot(rc.t_s, rc.measured_si * k, color="black", lw=1.0, label="measured")
-    ax_y.plot(rc.t_s, rc.predicted_si * k, color="tab:red", lw=0.9, label="model")
-    ax_y.set_ylabel(f"{quantity} [{unit}]")
-    ax_y.legend(loc="upper right", fontsize=8)
-    ax_y.set_title(f"{rc.name}: {rc.overall.format(unit)}  (shaded: worst segments)", fontsize=10)
-    ax_e.plot(rc.t_s, rc.error_si * k, color="tab:blue", lw=0.7)
-    ax_e.axhline(0.0, color="grey", lw=0.5)
-    ax_e.set_xlabel("time from the recording's start [s]")
-    ax_e.set_ylabel(f"model - measured [{unit}]")
-    return fig
-
-
-def _plot_loops(comparison: Comparison, rc: RecordingComparison) -> Figure:
-    """Hysteresis loops of model and measurement; error against pressure and its rate."""
-    from matplotlib.figure import Figure
-
-    unit, k = comparison.display_unit, comparison.display_scale
-    pressure_pa, _ = _series(rc, comparison.direction)
-    pressure_bar = pressure_pa / PA_PER_BAR
-    _, rate_pa_per_s = smoothed_rate(rc.t_s, pressure_pa)
-    err = rc.error_si * k
-    fig = Figure(figsize=(15, 4.6), layout="constrained")
-    ax_l, ax_p, ax_r = fig.subplots(1, 3)
-    if comparison.direction == "forward":
-        x_in = pressure_bar
-        x_label, y_label = "pressure [bar]", "bend [deg]"
-    else:
-        x_in = rad_to_deg(rc.input_si)
-        x_label, y_label = "desired bend [deg]", "pressure [bar]"
-    ax_l.plot(x_in, rc.measured_si * k, color="black", lw=0.8, label="measured")
-    ax_l.plot(x_in, rc.predicted_si * k, color="tab:red", lw=0.8, label="model")
-    ax_l.set_xlabel(x_label)
-    ax_l.set_ylabel(y_label)
-    ax_l.set_title("hysteresis loops", fontsize=10)
-    ax_l.legend(loc="upper left", fontsize=8)
-    _error_scatter(ax_p, pressure_bar, err, "pressure [bar]", unit)
-    ax_p.set_title("error against pressure", fontsize=10)
-    _error_scatter(ax_r, np.abs(rate_pa_per_s) / PA_PER_BAR, err, "|pressure rate| [bar/s]", unit)
-    ax_r.set_title("error against |rate of pressure|", fontsize=10)
-    fig.suptitle(rc.name, fontsize=11)
-    return fig
-
-
-def _plot_regimes(comparison: Comparison) -> Figure:
-    """RMSE per regime (pooled over recordings), the overall RMSE as a line."""
-    from matplotlib.figure import Figure
-
-    unit, k = comparison.display_unit, comparison.display_scale
-    names = list(comparison.by_regime)
-    values = [0.0 if (m := comparison.by_regime[n]) is None else m.rmse * k for n in names]
-    fig = Figure(figsize=(8, 3.6), layout="constrained")
-    ax = fig.subplots()
-    bars = ax.bar(names, values, color="tab:blue")
-    ax.bar_label(bars, fmt="%.2f", fontsize=8)
-    for bar, name in zip(bars, names, strict=True):
-        if comparison.by_regime[name] is None:
-            ax.annotate("n/a", (bar.get_x() + bar.get_width() / 2, 0.0), ha="center", va="bottom")
-    ax.axhline(comparison.overall.rmse * k, color="tab:red", ls="--", lw=1.0, label="overall")
-    ax.set_ylabel(f"RMSE [{unit}]")
-    ax.set_title(f"{comparison.model_kind}: RMSE per regime, all recordings", fontsize=10)
-    ax.legend(loc="upper right", fontsize=8)
-    ax.tick_params(axis="x", labelrotation=20)
-    return fig
-
-
-def _metrics_row(label: str, m: ErrorMetrics | None, k: float) -> str:
-    cells = [html.escape(label)]
-    if m is None:
-        cells += ["n/a", "n/a", "n/a", "too few"]
-    else:
-        nrmse = "n/a" if m.nrmse is None else f"{100 * m.nrmse:.2f} %"
-        cells += [f"{m.rmse * k:.3f}", f"{m.mae * k:.3f}", nrmse, str(m.n_samples)]
-    return "<tr>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>"
-
-
-_CSS: Final = """
-body { font-family: sans-serif; max-width: 1500px; margin: 1em auto; padding: 0 1em; }
-table { border-collapse: collapse; margin: 0.5em 0 1.5em; }
-th, td { border: 1px solid #ccc; padding: 0.25em 0.6em; text-align: right; }
-th:first-child, td:first-child { text-align: left; }
-th { background: #f0f0f0; }
-img { max-width: 100%; display: block; margin: 0.5em 0 1.5em; }
-.note { color: #555; }
-"""
-
-
-def write_report(comparison: Comparison, out_dir: Path, title: str) -> Path:
-    """Write ``out_dir/index.html`` with the tables and plots; returns its path.
-
-    The page is plain HTML (no script, images by relative path), so the directory can be
-    copied, archived or attached as it is. Plots cover the first
-    :data:`MAX_PLOTTED_RECORDINGS` recordings; the tables cover all. ``comparison.json``
-    beside it holds :meth:`Comparison.to_dict`.
-    """
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    unit, k = comparison.display_unit, comparison.display_scale
-    esc = html.escape
-
-    def save(fig: Figure, name: str) -> str:
-        fig.savefig(out_dir / name, dpi=90)
-        return name
-
-    summary_png = save(_plot_regimes(comparison), "regimes.png")
-    ranked = list(enumerate(comparison.worst, 1))
-    figures: list[tuple[str, list[str]]] = []
-    for i, rc in enumerate(comparison.recordings[:MAX_PLOTTED_RECORDINGS]):
-        stem = _file_stem(i, rc.name)
-        mine = [(rank, s) for rank, s in ranked if s.recording == rc.name]
-        figures.append(
-            (
-                rc.name,
-                [
-                    save(_plot_time(comparison, rc, mine), f"{stem}_time.png"),
-                    save(_plot_loops(comparison, rc), f"{stem}_loops.png"),
-                ],
-            )
-        )
-    (out_dir / "comparison.json").write_text(json.dumps(comparison.to_dict(), indent=2) + "\n")
-
-    head = "<tr><th>{}</th><th>RMSE [{u}]</th><th>MAE [{u}]</th><th>NRMSE</th><th>samples</th></tr>"
-    parts = [
-        "<!DOCTYPE html>",
-        '<html lang="en"><head><meta charset="utf-8">',
-        f"<title>{esc(title)}</title><style>{_CSS}</style></head><body>",
-        f"<h1>{esc(title)}</h1>",
-        f"<p>Model <b>{esc(comparison.model_kind)}</b> ({esc(comparison._mapping())}) against "
-        f"{len(comparison.recordings)} recording(s). Errors are model minus measurement, in "
-        f"{esc(unit)}; MAE is the <em>maximum</em> absolute error (thesis eq. 5.13); NRMSE is "
-        "RMSE over the range of the measurement (eq. 5.15). Regimes are classified from the "
-        "recording's pressure and measured bend.</p>",
-        "<h2>Metrics</h2><table>",
-        head.format("", u=esc(unit)),
-        _metrics_row("overall", comparison.overall, k),
-    ]
-    parts += [_metrics_row(name, m, k) for name, m in comparison.by_regime.items()]
-    parts.append("</table>")
-    parts.append(f'<img src="{esc(summary_png)}" alt="RMSE per regime">')
-    if len(comparison.recordings) > 1:
-        parts += ["<h2>Recordings</h2><table>", head.format("recording", u=esc(unit))]
-        parts += [_metrics_row(r.name, r.overall, k) for r in comparison.recordings]
-        parts.append("</table>")
-    parts += [
-        "<h2>Worst segments</h2>",
-        f'<p class="note">Fixed windows ranked by RMSE, neighbours merged; time in seconds from '
-        f"the recording's start. Regime: the one covering most samples ({MIXED} if none covers "
-        "more than half).</p>",
-        "<table><tr><th>#</th><th>recording</th><th>from [s]</th><th>to [s]</th>"
-        f"<th>regime</th><th>RMSE [{esc(unit)}]</th><th>max |error| [{esc(unit)}]</th>"
-        "<th>samples</th></tr>",
-    ]
-    for rank, s in ranked:
-        cells = [
-            str(rank),
-            esc(s.recording),
-            f"{s.start_s:.2f}",
-            f"{s.end_s:.2f}",
-            esc(s.regime),
-            f"{s.rmse * k:.3f}",
-            f"{s.max_abs * k:.3f}",
-            str(s.n_samples),
-        ]
-        parts.append("<tr>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
-    parts.append("</table>")
-    for name, images in figures:
-        parts.append(f"<h2>{esc(name)}</h2>")
-        parts += [f'<img src="{esc(src)}" alt="{esc(name)}">' for src in images]
-    skipped = len(comparison.recordings) - len(figures)
-    if skipped > 0:
-        parts.append(
-            f'<p class="note">{skipped} more recording(s) not plotted (the first '
-            f"{MAX_PLOTTED_RECORDINGS} are); their metrics are in the tables above.</p>"
-        )
-    parts.append("</body></html>")
-    index = out_dir / "index.html"
-    index.write_text("\n".join(parts) + "\n", encoding="utf-8")
-    return index
