@@ -6,7 +6,7 @@ import threading
 
 from catheter_driver.emulators.base import Emulator
 from catheter_driver.emulators.rig_core import EmulatedRig
-from catheter_driver.protocols import ParserCounters, keller
+from catheter_driver.protocols import keller
 from catheter_driver.transports.base import ByteTransport, TransportError
 
 _GARBAGE = b"\x00\xff\x37\x49\x01\x30\x13"
@@ -50,11 +50,6 @@ class KellerEmulator(Emulator):
         """Requests addressed to this device, since creation."""
         self._parser = keller.KellerRequestParser()
         self._initialised = threading.Event()
-
-    @property
-    def parser_counters(self) -> ParserCounters:
-        """What the request parser dropped (garbage from the driver side)."""
-        return self._parser.counters
 
     def power_cycle(self) -> None:
         """Forget the F48 initialisation, as after a power loss."""

@@ -198,10 +198,3 @@ class EmulatedRig:
         """What the transmitter reads now, gauge [Pa] (0 before the first step: vented)."""
         sample = self.latest
         return 0.0 if sample is None else sample.pressure_measured_pa
-
-    @property
-    def laser_voltage_v(self) -> float:
-        """What the laser outputs now (inverse of eq. 3.1 on the sensed distance) [V]."""
-        sample = self.latest
-        distance_m = self.config.rig["straight_distance_m"] if sample is None else sample.distance_m
-        return float(self.geometry.distance_to_voltage_v(distance_m))
