@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +11,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 
 from catheter_models.bag.messages import fluid_pressure_cdr
 from catheter_models.cli import main
-from catheter_models.errors import MissingTopicError, SignalError
+from catheter_models.errors import BagError, MissingTopicError, SignalError
 from catheter_models.model_dir import ModelDirError
 from catheter_models.models import ModelError, load_model, model_class
 from catheter_models.models.base import (
@@ -21,7 +22,12 @@ from catheter_models.models.base import (
     Recording,
     check_rates,
 )
-from catheter_models.models.data import recording_from_bag, simulate_recording
+from catheter_models.models.data import (
+    locate_training_bags,
+    recording_from_bag,
+    simulate_recording,
+)
+from catheter_models.models.drdpi import DRDPI
 from catheter_models.models.evaluate import run_compensator
 from catheter_models.units import AMBIENT_PRESSURE_PA
 
@@ -159,3 +165,37 @@ def test_simulated_recording_is_a_recording() -> None:
     rec = simulate_recording("model_test_up_chirp")
     assert rec.source == "simulated:model_test_up_chirp" and rec.sha256 == ""
     assert rec.io("inverse")[0] is rec.angle_rad
+
+
+@pytest.mark.filterwarnings("ignore::catheter_models.gaps.BagGapWarning")
+def test_a_trained_models_manifest_names_its_bags_not_their_paths(tmp_path: Path) -> None:
+    """training_bags holds bag names and hashes: the training machine's paths never ship."""
+    bags_dir = REPO / "bags"
+    rec = recording_from_bag(bags_dir / "model_test_descending_sine")  # an absolute path
+    assert Path(rec.source).is_absolute()
+    tiny = {"max_generations": 1, "popsize": 2, "wall_time_s": 2.0, "polish": "none"}
+    model = DRDPI(n_play=2, n_deadband=1, budget=tiny).fit([rec], progress=False)
+    model.save(tmp_path / "m", training=[rec])
+    on_disk = json.loads((tmp_path / "m" / "manifest.json").read_text())["training_bags"]
+    assert on_disk == {"model_test_descending_sine": rec.sha256}
+    assert all("/" not in k and "\\" not in k for k in on_disk)
+    # A reader finds each bag by name in a bags directory and proves it by its hash.
+    found = locate_training_bags(on_disk, bags_dir)
+    assert found == {"model_test_descending_sine": bags_dir / "model_test_descending_sine"}
+
+
+def test_locating_a_training_bag_checks_its_hash(tmp_path: Path) -> None:
+    bags_dir = REPO / "bags"
+    with pytest.raises(BagError, match="sha256"):
+        locate_training_bags({"model_test_up_chirp": "0" * 64}, bags_dir)
+    with pytest.raises(BagError, match="not found"):
+        locate_training_bags({"no_such_bag": "0" * 64}, bags_dir)
+    assert locate_training_bags({"simulated:x": ""}, bags_dir) == {}
+
+
+def test_the_shipped_manifests_name_bags_not_paths() -> None:
+    data = REPO / "src" / "catheter_control" / "catheter_control" / "data"
+    for manifest in sorted(data.glob("*/manifest.json")):
+        names = json.loads(manifest.read_text())["training_bags"]
+        assert names, manifest
+        assert all("/" not in k and "\\" not in k for k in names), manifest

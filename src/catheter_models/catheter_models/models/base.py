@@ -23,7 +23,7 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
+from pathlib import Path, PurePath
 from typing import Any, ClassVar, Literal, Protocol, Self
 
 import numpy as np
@@ -103,6 +103,17 @@ class Recording:
 
     def __len__(self) -> int:
         return int(self.pressure_pa.size)
+
+    @property
+    def bag_name(self) -> str:
+        """How a model's manifest names this recording: the bag's file or directory name.
+
+        Never the path: a path is the training machine's and means nothing where the model
+        is shipped; the name and :attr:`sha256` are enough to find the bag in any bags
+        directory and prove it is the one (``models.data.locate_training_bags``). A recording
+        without a source keeps its name; a simulated one, ``simulated:<preset>``.
+        """
+        return PurePath(self.source).name if self.source else self.name
 
     @property
     def duration_s(self) -> float:
@@ -347,7 +358,7 @@ class Model(ABC):
             outputs,
             self._payload(),
             normalization=self._normalization(),
-            training_bags={r.source or r.name: r.sha256 for r in training},
+            training_bags={r.bag_name: r.sha256 for r in training},
             metrics={
                 "rate_hz": rate,
                 "direction": self.direction,

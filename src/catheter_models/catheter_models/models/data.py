@@ -5,13 +5,15 @@ streams a model needs, refuses a bag that lacks them (naming the topic), resampl
 uniform grid, and hashes the bag so a model's manifest records exactly what it learned from.
 ``simulate_recordings`` runs thesis signal presets through the offline plant, for benchmarks
 and tests that need many signals fast; it yields the same ``Recording`` a bag does.
+``locate_training_bags`` goes the other way: from a manifest's ``training_bags`` (bag name ->
+hash) to the bags themselves in a bags directory, each checked against its hash.
 """
 
 from __future__ import annotations
 
 import hashlib
 import warnings
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -76,6 +78,49 @@ def recording_from_bag(path: Path | str, rate_hz: float = SENSOR_RATE_HZ) -> Rec
         source=str(path),
         sha256=bag_sha256(path),
     )
+
+
+def locate_training_bags(training_bags: Mapping[str, str], bags_dir: Path | str) -> dict[str, Path]:
+    """Find each bag a model was trained on, by name, under ``bags_dir``; check its hash.
+
+    A manifest names its training bags by bag name (a directory or ``.mcap`` file name) and
+    sha256, never by path, so the same manifest resolves on any machine that holds the bags.
+    A bag is looked for directly in ``bags_dir`` first, then anywhere below it. Entries
+    without a hash (simulated recordings) are skipped.
+
+    Args:
+        training_bags: A manifest's ``training_bags``: bag name -> sha256 (:func:`bag_sha256`).
+        bags_dir: Directory that holds the bags.
+
+    Returns:
+        Bag name -> its path, for every entry with a hash.
+
+    Raises:
+        BagError: A bag is not found, found more than once below ``bags_dir``, or fails its
+            hash check (the message names it).
+    """
+    root = Path(bags_dir)
+    found: dict[str, Path] = {}
+    for name, expected in training_bags.items():
+        if not expected:
+            continue
+        if "/" in name or "\\" in name:
+            raise BagError(f"training bag {name!r} is a path, not a bag name")
+        path = root / name
+        if not path.exists():
+            matches = sorted(root.rglob(name))
+            if len(matches) != 1:
+                where = "not found" if not matches else f"found {len(matches)} times"
+                raise BagError(f"training bag {name!r} {where} under {root}")
+            path = matches[0]
+        actual = bag_sha256(path)
+        if actual != expected:
+            raise BagError(
+                f"training bag {path} fails its sha256 check (manifest {expected[:12]}..., "
+                f"bag {actual[:12]}...): it is not the bag the model was trained on"
+            )
+        found[name] = path
+    return found
 
 
 def recordings_from_bags(
