@@ -15,7 +15,6 @@ import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -171,8 +170,3 @@ def plot_history(versions: Sequence[Version], path: Path) -> Path:
     ax.legend()
     fig.savefig(path, dpi=110)
     return path
-
-
-def history_dict(versions: Sequence[Version]) -> list[dict[str, Any]]:
-    """JSON-ready."""
-    return [asdict(v) for v in versions]
