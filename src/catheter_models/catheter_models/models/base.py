@@ -29,7 +29,7 @@ from typing import Any, ClassVar, Literal, Protocol, Self
 import numpy as np
 import numpy.typing as npt
 
-from catheter_models.contract import ANGLE_DESIRED, PRESSURE_COMMAND, TIP_ANGLE
+from catheter_models.contract import ANGLE_DESIRED, PRESSURE_COMMAND, SENSOR_RATE_HZ, TIP_ANGLE
 from catheter_models.errors import CatheterError, ParameterError, SignalError
 from catheter_models.model_dir import Manifest, read_model_dir, write_model_dir
 
@@ -207,7 +207,7 @@ class DataRequirement:
                 f"{self.why}".strip()
             )
         if n < self.min_samples:
-            rate = recordings[0].rate_hz if recordings else 250.0
+            rate = recordings[0].rate_hz if recordings else SENSOR_RATE_HZ
             more = self.min_samples - n
             raise InsufficientDataError(
                 f"{kind}: {n} training samples given, at least {self.min_samples} needed: "
