@@ -188,6 +188,8 @@ def with_lead_in(
     Returns:
         Knot times [s] and angles [rad], and when the trajectory itself starts [s].
     """
+    # Imported here, not at the top: evaluate brings in the simulated plant (about 0.7 s even
+    # in a running compensator node), which only a lead-in needs.
     from catheter_models.models.evaluate import lead_in
 
     t = np.asarray(t_s, dtype=float)
