@@ -48,6 +48,7 @@ from scipy import optimize
 from threadpoolctl import threadpool_limits
 
 from catheter_models.errors import ParameterError
+from catheter_models.hysteresis.operators import play_step
 from catheter_models.models.base import ModelError
 
 FloatArray = npt.NDArray[np.float64]
@@ -205,7 +206,7 @@ def _free_pi_kernel(  # noqa: PLR0917 - numba compiles positional arguments only
             for i in range(n_thr):
                 at = plays + j * n_thr + i
                 th = thresholds[i] * scale + beta_s * speed
-                v = max(s - th, min(s + th, state[at]))
+                v = play_step(s, th, state[at])
                 state[at] = v
                 if keep:
                     features[k, j * n_thr + i] = v
