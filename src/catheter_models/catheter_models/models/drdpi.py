@@ -499,7 +499,7 @@ class DRDPI(Model):
             raise ParameterError(f"n_play = {n_play!r} must be an integer in [1, 200]")
         if not (isinstance(n_deadband, int) and 0 <= n_deadband <= 50):
             raise ParameterError(f"n_deadband = {n_deadband!r} must be an integer in [0, 50]")
-        rate_alpha(rate_filter_s, 250.0)  # validates
+        rate_alpha(rate_filter_s, SENSOR_RATE_HZ)  # validates
         self.n_play = n_play
         self.n_deadband = n_deadband
         self.rate_filter_s = float(rate_filter_s)
