@@ -2,14 +2,21 @@
 
 Set-points (``angle/desired``) and measurements (``tip/angle``) are aligned on their header
 stamps, the time each value was true, never on receive time (docs/interfaces.md).
+
+Besides the score, this holds what ``follow_trajectory`` keeps of a run
+(:class:`RunRecord`, filled by :mod:`catheter_control.trajectory_client`) and what it makes
+of it: the nodes' timing and controller values over the run, the samples lost, and the
+facts written to ``report.json``.
 """
 
 from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+from array import array
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -18,7 +25,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 import numpy.typing as npt
 
+from catheter_models.contract import ANGLE_DESIRED, TIP_ANGLE
 from catheter_models.errors import CatheterError
+from catheter_models.gaps import find_gaps, say_gaps
 from catheter_models.metrics import (
     ErrorMetrics,
     classify_regimes,
@@ -242,3 +251,227 @@ def timing_text(timing: dict[str, float | int | str | None]) -> str:
             f"p99 {ms('command_latency_p99_ms')}, max {ms('command_latency_max_ms')}",
         ]
     )
+
+
+# -- a follow_trajectory run: what it keeps, and what it reports -------------------------------
+
+Report = dict[str, str]
+"""One node's status values from ``/diagnostics``, by key."""
+
+_CONTROLLER_KEYS = (
+    "compensator",
+    "feedback",
+    "feedback_untrusted_samples",
+    "feedback_saturated_ticks",
+    "feedback_integral_pa",
+)
+"""What the compensator says it ran, as the report lists it."""
+
+_TIMING_SERIES_KEYS = (
+    "state",
+    "ticks",
+    "missed_deadlines",
+    "lateness_p99_ms",
+    "compute_p99_ms",
+    "behind_max_ms",
+)
+"""The compensator's per-report timing values kept in ``timing_series`` (and each
+``<stream>_longest_silence_ms`` it reports)."""
+
+
+class Series:
+    """Stamps [s] and values of one topic, packed: 16 bytes a sample.
+
+    A run keeps every sample to score it; as a list of tuples (~120 bytes a sample) the
+    10-minute soak at 1 kHz grew 10 MB a minute.
+    """
+
+    def __init__(self) -> None:
+        self.t_s = array("d")
+        self.values = array("d")
+
+    def append(self, t_s: float, value: float) -> None:
+        """Keep one sample: its header stamp [s] and its value."""
+        self.t_s.append(t_s)
+        self.values.append(value)
+
+    def clear(self) -> None:
+        """Forget every sample (those from before the run)."""
+        self.t_s = array("d")
+        self.values = array("d")
+
+    def __len__(self) -> int:
+        return len(self.t_s)
+
+
+@dataclass
+class RunRecord:
+    """Everything a ``follow_trajectory`` run heard, for its report.
+
+    Diagnostics are kept with their monotonic receipt time [s], so the report can take the
+    ones that span the run.
+    """
+
+    desired: Series = field(default_factory=Series)
+    measured: Series = field(default_factory=Series)
+    stopped: str = ""
+    """Why the compensator stopped part-way ('' if the run went to its end)."""
+    recorder: Report = field(default_factory=dict)
+    """The recorder's newest report."""
+    compensator: list[tuple[float, Report]] = field(default_factory=list)
+    driver: list[tuple[float, Report]] = field(default_factory=list)
+    """The node that received the commands: sim_hardware or valve_driver."""
+    sent_at_s: float = 0.0
+    """When the goal was sent (monotonic) [s]."""
+    started_at_s: float | None = None
+    """When the first set-point arrived (monotonic) [s]; None if none did."""
+
+    @property
+    def run_start_s(self) -> float:
+        """The run's start: its first set-point, or the goal if none came."""
+        return self.started_at_s if self.started_at_s is not None else self.sent_at_s
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    """The nodes' reports over one run, and what the report makes of them."""
+
+    first_report_s: float
+    """Receipt of the last compensator report before the run started [s]: reports from
+    then on span the run."""
+    timing: dict[str, float | int | str | None]
+    controller: Report
+
+    @classmethod
+    def of(cls, record: RunRecord) -> RunSummary:
+        """Reports from the last one before the first set-point to the first after the end."""
+        start_s = record.run_start_s
+        first = max([t for t, _ in record.compensator if t <= start_s], default=start_s)
+        timing = timing_summary(
+            [v for t, v in record.compensator if t >= first],
+            [v for t, v in record.driver if t >= first],
+        )
+        # What the compensator says it ran, from its last report of the run.
+        last = next((v for t, v in reversed(record.compensator) if t >= first), {})
+        controller = {k: last[k] for k in _CONTROLLER_KEYS if k in last}
+        return cls(first, timing, controller)
+
+    def controller_text(self) -> str | None:
+        """``Controller: compensator clstm, feedback none``; None if it said nothing."""
+        if not self.controller:
+            return None
+        return "Controller: " + ", ".join(f"{k} {v}" for k, v in self.controller.items())
+
+
+def score_record(record: RunRecord, duration_s: float, lead_s: float) -> TrackingResult:
+    """Score the run from its first set-point, leaving out the lead-in (``lead_s``)."""
+    start = record.desired.t_s[0]
+    return score_run(
+        record.desired.t_s,
+        record.desired.values,
+        record.measured.t_s,
+        record.measured.values,
+        window_s=(start + lead_s, start + duration_s),
+    )
+
+
+@dataclass(frozen=True)
+class SampleLosses:
+    """What the bag and the score lack: counts by topic, and lines for a person."""
+
+    bag: dict[str, int]
+    scored: dict[str, int]
+    said: list[str]
+
+
+def sample_losses(record: RunRecord, bag_path: Path | None) -> SampleLosses:
+    """What the bag and the score lack: counts by topic, and lines for a person.
+
+    The bag's counts are the recorder's at its last report (1 Hz); the bag's own
+    ``custom_data`` has the final ones.
+    """
+    said: list[str] = []
+    bag: dict[str, int] = {}
+    if bag_path is not None:
+        prefix = "lost "
+        bag = {k[len(prefix) :]: int(v) for k, v in record.recorder.items() if k.startswith(prefix)}
+        if not record.recorder:
+            said.append("follow_trajectory: no report from the recorder; the bag is unchecked")
+        elif any(bag.values()):
+            said.append(
+                "follow_trajectory: the bag lacks samples: "
+                + ", ".join(f"{n} of {t}" for t, n in bag.items() if n)
+                + " (in the command streams these include ticks the compensator skipped, "
+                "commands that never existed)"
+            )
+    scored: dict[str, int] = {}
+    for name, series, pauses in (
+        (ANGLE_DESIRED.name, record.desired, True),
+        (TIP_ANGLE.name, record.measured, False),
+    ):
+        t_s = np.frombuffer(series.t_s, dtype=float)
+        period_s, found = find_gaps(t_s, pauses=pauses)
+        scored[name] = sum(m for _, _, m in found)
+        line = say_gaps(name, period_s, found, origin_s=float(t_s[0]) if t_s.size else 0.0)
+        if line is not None:
+            said.append(f"follow_trajectory: scored without them: {line}")
+    return SampleLosses(bag, scored, said)
+
+
+def run_facts(
+    record: RunRecord,
+    summary: RunSummary,
+    losses: SampleLosses,
+    *,
+    trajectory: str,
+    bag_path: Path | None,
+    lead_s: float,
+) -> dict[str, Any]:
+    """What ``report.json`` says of the run beside its metrics, in the order it lists them."""
+    start_s, first = record.run_start_s, summary.first_report_s
+    return {
+        "trajectory": trajectory,
+        "bag": str(bag_path or ""),
+        # Why the compensator stopped part-way ('' if the run went to its end).
+        "stopped": record.stopped,
+        "lead_in_s": lead_s,
+        "controller": summary.controller,
+        "timing": summary.timing,
+        # Samples missing from the bag (the recorder's counts, by topic) and from the
+        # streams this run was scored on (from their stamps).
+        "bag_samples_lost": losses.bag,
+        "scored_samples_lost": losses.scored,
+        # How far the recorder's writer fell behind its intake (messages queued at worst,
+        # and at its last report): a queue that only grows would end in drops.
+        "recorder_queue": {
+            k: int(record.recorder[k])
+            for k in ("queue", "queue_max")
+            if str(record.recorder.get(k, "")).isdigit()
+        },
+        # The compensator's 1 Hz reports over the run: where in it deadlines were missed,
+        # how far behind its loop fell and how long each sensor it needs went quiet.
+        "timing_series": [
+            {
+                "t_s": round(t - start_s, 3),
+                **{
+                    k: v.get(k, "")
+                    for k in (
+                        *_TIMING_SERIES_KEYS,
+                        *(k for k in v if k.endswith("_longest_silence_ms")),
+                    )
+                },
+            }
+            for t, v in record.compensator
+            if t >= first
+        ],
+        # The driver's (the sensors' producer) beside it: a sensor silence with the
+        # driver's loop on time was lost on the way, one with it behind was never sent.
+        "driver_timing_series": [
+            {
+                "t_s": round(t - start_s, 3),
+                **{k: v.get(k, "") for k in ("missed_deadlines", "behind_max_ms")},
+            }
+            for t, v in record.driver
+            if t >= first
+        ],
+    }

@@ -1,0 +1,131 @@
+"""The graph ``follow_trajectory --sim`` / ``--emulated-rig`` brings up before its run.
+
+``--sim`` starts the recorder, the simulated rig and the compensator; ``--emulated-rig``
+puts emulated devices (Keller transmitter, DAC bridge, laser ADC over pseudo-terminals)
+around the simulated rig and runs the real ``valve_driver`` and ``laser_angle`` on them,
+with a laser calibration written for the emulated laser. Without either flag
+``follow_trajectory`` starts nothing and uses the nodes that are up. This is its own file
+because setting up a local rig is a job of its own, apart from running and scoring the
+trajectory.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from catheter_control.bringup import (
+    EmulatedDevices,
+    ProcessGraph,
+    driver_specs,
+    sim_graph_specs,
+)
+from catheter_control.models import SHIPPED
+from catheter_models.errors import CatheterError
+from catheter_models.geometry import Calibration
+
+_PLANT_STRAIGHT_DISTANCE_M = 0.065
+"""The simulated rig's laser distance with the tip straight (plant rig parameter default)."""
+
+_LOOP_NODES = frozenset({"sim_hardware", "compensator", "valve_driver", "laser_angle"})
+"""Nodes with deadline loops, which take ``rt_priority``."""
+
+
+class LocalGraphError(CatheterError):
+    """The local graph did not come up: the emulated devices or a node failed to start."""
+
+
+@dataclass
+class LocalGraph:
+    """A started local graph: its nodes, and the emulated devices under them if any."""
+
+    graph: ProcessGraph
+    devices: EmulatedDevices | None
+
+    def stop(self) -> None:
+        """Stop the nodes, then the devices they were talking to."""
+        self.graph.stop()
+        if self.devices is not None:
+            self.devices.stop()
+
+
+def start_local_graph(
+    args: argparse.Namespace,
+    run_dir: Path,
+    bag_path: Path,
+    name: str,
+    signal_params: dict[str, object],
+) -> LocalGraph:
+    """Start the graph ``args`` (follow_trajectory's command line) asks for, and say so.
+
+    Args:
+        args: follow_trajectory's parsed command line (``--sim`` or ``--emulated-rig``, the
+            compensator and feedback, the rate, ``--rt-priority``, the namespace).
+        run_dir: The run's directory: logs, and the emulated laser's calibration, go there.
+        bag_path: Where the recorder writes the bag.
+        name: The trajectory's name, for the bag's metadata.
+        signal_params: The trajectory's parameters, for the bag's metadata.
+
+    Raises:
+        LocalGraphError: the devices or a node failed to start (the message says which).
+    """
+    # A local graph must never reach a real rig on the network.
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    hardware = (
+        "simulated thesis rig (catheter_driver sim_hardware)"
+        if args.sim
+        else "emulated devices (Keller, DAC bridge, laser ADC over ptys) around the "
+        "simulated rig, real valve_driver and laser_angle"
+    )
+    custom = {
+        "signal": name,
+        "signal_params": repr(signal_params),
+        "hardware": hardware,
+        "compensator": args.compensator,
+        "model_dir": args.model_dir or f"shipped ({SHIPPED[args.compensator]})",
+        "feedback": args.feedback,
+        "feedback_gains": args.feedback_gains or "beside the model (or shipped)",
+    }
+    run_dir.mkdir(parents=True, exist_ok=True)
+    specs = sim_graph_specs(
+        bag_path,
+        custom,
+        compensator_params={
+            "control_rate_hz": args.control_rate_hz,
+            "compensator": args.compensator,
+            "model_dir": args.model_dir,
+            "feedback": args.feedback,
+            "feedback_gains": args.feedback_gains,
+            # The local rig has a laser: stop if it goes quiet (a patient's would not).
+            "require_tip_angle": True,
+        },
+    )
+    devices = None
+    if args.emulated_rig:
+        devices = EmulatedDevices()
+        try:
+            ports = devices.start()
+        except RuntimeError as exc:
+            raise LocalGraphError(str(exc)) from exc
+        # The emulated laser is taken as zeroed at the plant's straight-tip distance,
+        # as ~/zero would measure it with the muscle vented.
+        calibration = run_dir / "laser_calibration.json"
+        Calibration(_PLANT_STRAIGHT_DISTANCE_M, 0.0, 0, "emulated rig").save(calibration)
+        recorder, _sim, compensator = specs
+        specs = [recorder, *driver_specs(ports, calibration), compensator]
+    if args.rt_priority is not None:
+        for spec in specs:
+            if spec.name in _LOOP_NODES:
+                spec.params["rt_priority"] = args.rt_priority
+    graph = ProcessGraph(specs, args.namespace, log_dir=run_dir / "logs")
+    what = "simulated rig" if args.sim else "emulated devices and the real drivers"
+    print(f"follow_trajectory: starting the {what} (logs in {run_dir / 'logs'})")
+    try:
+        graph.start()
+    except CatheterError as exc:  # a node failed configure/activate, or exited
+        # The graph stopped its own nodes; the emulated devices are left as they were
+        # (the process ends on this error).
+        raise LocalGraphError(str(exc)) from exc
+    return LocalGraph(graph, devices)

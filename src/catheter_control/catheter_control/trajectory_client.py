@@ -1,0 +1,293 @@
+"""The client side of a ``follow_joint_trajectory`` run: what ``follow_trajectory`` does on ROS.
+
+It waits for the graph (measurements flowing, the compensator's action server listening and,
+with a bag, the recorder hearing every stream), sends the trajectory as a
+control_msgs/FollowJointTrajectory goal, shows progress from the goal's feedback, takes a
+refusal or an early stop from its result, and keeps every set-point, measurement and
+diagnostics report it hears in a :class:`~catheter_control.tracking_report.RunRecord` for
+the report. The server side is :mod:`catheter_control.trajectory_action`. Scoring and the
+report are :mod:`catheter_control.tracking_report`'s; the command line and exit codes are
+:mod:`catheter_control.follow_trajectory`'s.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import rclpy
+from action_msgs.msg import GoalStatus
+from control_msgs.action import FollowJointTrajectory
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.action.client import ActionClient, ClientGoalHandle
+from rclpy.node import Node
+from rclpy.task import Future
+from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectoryPoint
+
+from catheter_control.bringup import ProcessGraph
+from catheter_control.progress_bar import ProgressBar
+from catheter_control.tracking_report import RunRecord
+from catheter_control.trajectory import TrajectoryPlan
+from catheter_control.trajectory_action import ACTION_NAME
+from catheter_models.contract import (
+    ANGLE_DESIRED,
+    BEND_JOINT,
+    DIAGNOSTICS,
+    PRESSURE_COMMAND,
+    PRESSURE_MEASURED,
+    TIP_ANGLE,
+)
+from catheter_models.errors import CatheterError
+from catheter_models.units import NS_PER_S, s_to_ns
+from catheter_ros import qos
+from catheter_ros.messages import angle_rad_from, ns_from_time
+
+_START_TIMEOUT_S = 8.0
+"""The compensator holds a plan up to 5 s for its valve driver; allow for that and more."""
+
+_RAMP_DOWN_S = 1.0
+"""How long after the trajectory's end the run goes on: the compensator's ramp-down."""
+
+_LAST_REPORT_WAIT_S = 2.5
+"""How long to wait after the run for one more report from each node (they report at 1 Hz)."""
+
+
+class GraphNotReadyError(CatheterError):
+    """The graph did not come up, or the compensator never started the trajectory."""
+
+
+class GoalRefusedError(CatheterError):
+    """The compensator refused the trajectory (its reason), before a set-point went out."""
+
+
+def follow(
+    plan: TrajectoryPlan,
+    *,
+    namespace: str,
+    ros_args: Sequence[str],
+    timeout_s: float,
+    graph: ProcessGraph | None,
+    wait_for_recorder: bool,
+    show_progress: bool,
+    lead_s: float,
+) -> RunRecord:
+    """Run ``plan`` on the graph in ``namespace`` and return everything heard.
+
+    Args:
+        plan: The validated trajectory.
+        namespace: The graph's namespace.
+        ros_args: rclpy's arguments (after ``--ros-args``), for this tool's own node.
+        timeout_s: How long to wait for the graph.
+        graph: The local graph this tool started (its nodes are watched while it comes
+            up), or None for a graph that was already running.
+        wait_for_recorder: A bag is recorded: wait until the recorder hears every stream.
+        show_progress: Show a progress bar (on a terminal).
+        lead_s: The unscored lead-in at the start of ``plan`` [s] (0: none).
+
+    Raises:
+        GraphNotReadyError: the graph did not come up within ``timeout_s``, a started node
+            exited, or the compensator sent no set-points.
+        GoalRefusedError: the compensator refused the trajectory.
+    """
+    record = RunRecord()
+    with rclpy.init(
+        args=["follow_trajectory", "--ros-args", "-r", f"__ns:={namespace}", *ros_args]
+    ):
+        client = _Client(Node("follow_trajectory"), record, timeout_s)
+        client.wait_for_graph(graph)
+        if wait_for_recorder:
+            client.wait_for_recorder()
+        client.run(plan, show_progress=show_progress, lead_s=lead_s)
+        if record.stopped:
+            print(f"follow_trajectory: compensator: {record.stopped}", file=sys.stderr)
+        client.wait_for_last_reports()
+        client.node.destroy_node()
+    return record
+
+
+class _Client:
+    """This tool's node: its subscriptions fill ``record``; the action client sends the goal.
+
+    Args:
+        node: The tool's own node.
+        record: Where what is heard goes.
+        timeout_s: How long the graph (and the recorder) may take to be ready; the clock
+            starts now.
+    """
+
+    def __init__(self, node: Node, record: RunRecord, timeout_s: float) -> None:
+        self.node = node
+        self.record = record
+
+        def on_desired(msg: JointState) -> None:
+            record.desired.append(ns_from_time(msg.header.stamp) * 1e-9, angle_rad_from(msg))
+
+        def on_measured(msg: JointState) -> None:
+            record.measured.append(ns_from_time(msg.header.stamp) * 1e-9, angle_rad_from(msg))
+
+        def on_diag(msg: DiagnosticArray) -> None:
+            now = time.monotonic()
+            for status in msg.status:
+                values = {kv.key: kv.value for kv in status.values}
+                if status.name.endswith("compensator"):
+                    record.compensator.append((now, values))
+                elif status.name.endswith(("sim_hardware", "valve_driver")):
+                    record.driver.append((now, values))
+                elif status.name.endswith("recorder"):
+                    record.recorder = values
+
+        # The stamps stay `ns * 1e-9`, not units.ns_to_s (ns / 1e9): the two differ in the
+        # last bit for about half of all stamps, and scores are compared across versions.
+        # Our compensator's stream: reliable, so the score misses nothing on a busy host. The
+        # sensor may be anyone's driver: best effort matches whatever it offers.
+        node.create_subscription(JointState, ANGLE_DESIRED.name, on_desired, qos.RECORD)
+        node.create_subscription(JointState, TIP_ANGLE.name, on_measured, qos.KEEP_EVERY_SAMPLE)
+        node.create_subscription(DiagnosticArray, DIAGNOSTICS.name, on_diag, 10)
+        self.action: ActionClient[Any, Any, Any] = ActionClient(
+            node, FollowJointTrajectory, ACTION_NAME
+        )
+        self.timeout_s = timeout_s
+        self.deadline = time.monotonic() + timeout_s
+
+    def wait_for_graph(self, graph: ProcessGraph | None) -> None:
+        """Until measurements flow and the compensator listens; a started node must not exit."""
+        node, record = self.node, self.record
+        while time.monotonic() < self.deadline:
+            rclpy.spin_once(node, timeout_sec=0.1)
+            if graph is not None and (dead := graph.failed()):
+                for n in dead:
+                    print(f"--- {n} log ---\n{graph.log_tail(n)}", file=sys.stderr)
+                raise GraphNotReadyError(f"node(s) exited during start-up: {dead}")
+            if record.measured and self.action.server_is_ready():
+                return
+        missing = []
+        if not record.measured:
+            missing.append(f"no {node.resolve_topic_name(TIP_ANGLE.name)} samples")
+        if not self.action.server_is_ready():
+            # Actions resolve like topics: the namespace applies.
+            missing.append(f"no action server {node.resolve_topic_name(ACTION_NAME)}")
+        raise GraphNotReadyError(
+            f"graph not ready after {self.timeout_s:g} s: " + "; ".join(missing)
+        )
+
+    def wait_for_recorder(self) -> None:
+        """Until the recorder reports a publisher on every stream of the bag.
+
+        Discovery is pairwise: that we see the recorder does not mean it has matched the
+        compensator. Without this the bag would miss the start of the run.
+        """
+        streams = [
+            self.node.resolve_topic_name(t.name)
+            for t in (PRESSURE_COMMAND, ANGLE_DESIRED, TIP_ANGLE, PRESSURE_MEASURED)
+        ]
+
+        def unheard() -> list[str]:
+            recorder = self.record.recorder
+            return [t for t in streams if int(recorder.get(f"publishers {t}", "0")) < 1]
+
+        while unheard() and time.monotonic() < self.deadline:
+            rclpy.spin_once(self.node, timeout_sec=0.05)
+        if unheard():
+            raise GraphNotReadyError(
+                "the recorder hears no publisher on "
+                + ", ".join(unheard())
+                + f" after {self.timeout_s:g} s"
+            )
+
+    def run(self, plan: TrajectoryPlan, *, show_progress: bool, lead_s: float) -> None:
+        """Send the goal and spin through the trajectory and the ramp-down after it."""
+        node, record = self.node, self.record
+        goal = _goal(plan)
+        record.desired.clear()
+        plan_time_s = [0.0]  # of the newest feedback: the bar shows the compensator's clock
+
+        def on_feedback(msg: Any) -> None:
+            elapsed = msg.feedback.desired.time_from_start
+            plan_time_s[0] = elapsed.sec + elapsed.nanosec * 1e-9
+
+        sending: Future[ClientGoalHandle[Any, Any, Any]] = self.action.send_goal_async(
+            goal, feedback_callback=on_feedback
+        )
+        result_future: Future[Any] | None = None
+        finished = False
+        refusal = ""
+        record.sent_at_s = time.monotonic()
+        print(f"follow_trajectory: following {plan.name!r} ({plan.duration_s:.1f} s)")
+        if lead_s:
+            print(
+                f"follow_trajectory: the first {lead_s:g} s move from rest to "
+                f"{math.degrees(plan.desired_at(lead_s)):.1f} deg and hold (not scored)"
+            )
+        bar = ProgressBar(plan.duration_s, show_progress)
+        # Run through the trajectory and the ramp-down after it, timed from the first
+        # set-point: the compensator starts once its valve driver listens, not on receipt.
+        while (
+            record.started_at_s is None
+            or time.monotonic() - record.started_at_s < plan.duration_s + _RAMP_DOWN_S
+        ):
+            rclpy.spin_once(node, timeout_sec=0.05)
+            now = time.monotonic()
+            if record.started_at_s is None and record.desired:
+                record.started_at_s = now
+            if record.started_at_s is not None:
+                bar.show(plan_time_s[0])
+            if result_future is None and sending.done():
+                handle = sending.result()
+                if handle is None or not handle.accepted:
+                    refusal = "the goal was rejected"
+                else:
+                    result_future = handle.get_result_async()
+            if result_future is not None and result_future.done() and not finished:
+                finished = True
+                response = result_future.result()
+                status = GoalStatus.STATUS_UNKNOWN if response is None else response.status
+                outcome = (response and response.result.error_string) or f"status {status}"
+                if status != GoalStatus.STATUS_SUCCEEDED:
+                    # Aborted before a set-point went out: refused (the compensator's
+                    # reason); after: cut short, and the compensator ramped down.
+                    if record.started_at_s is None:
+                        refusal = outcome
+                    else:
+                        record.stopped = f"stopped: {outcome}; ramped down"
+            if refusal:
+                bar.close()
+                raise GoalRefusedError(f"the compensator refused the trajectory: {refusal}")
+            if record.stopped:
+                break
+            if record.started_at_s is None and now - record.sent_at_s > _START_TIMEOUT_S:
+                bar.close()
+                raise GraphNotReadyError(
+                    f"the compensator sent no set-points within {_START_TIMEOUT_S:g} s of the "
+                    "trajectory"
+                )
+        bar.close()
+
+    def wait_for_last_reports(self) -> None:
+        """One more report from each node after the run, so its counters span all of it."""
+        record = self.record
+        end_s = time.monotonic()
+        until = end_s + _LAST_REPORT_WAIT_S
+        while time.monotonic() < until and not (
+            record.compensator
+            and record.compensator[-1][0] > end_s
+            and record.driver
+            and record.driver[-1][0] > end_s
+        ):
+            rclpy.spin_once(self.node, timeout_sec=0.05)
+
+
+def _goal(plan: TrajectoryPlan) -> Any:
+    """The plan's knots as a FollowJointTrajectory goal for the bend joint."""
+    goal = FollowJointTrajectory.Goal()
+    goal.trajectory.joint_names = [BEND_JOINT]
+    for t, a in zip(plan.t_s, plan.angle_rad, strict=True):
+        point = JointTrajectoryPoint()
+        point.positions = [float(a)]
+        point.time_from_start.sec = math.floor(t)
+        point.time_from_start.nanosec = s_to_ns(t - math.floor(t)) % NS_PER_S
+        goal.trajectory.points.append(point)
+    return goal
