@@ -261,7 +261,7 @@ class TrajectoryActionServer:
             return Result.INVALID_GOAL, "component tolerances are for multi-DOF joints: none here"
         stamp = goal.trajectory.header.stamp
         if stamp.sec or stamp.nanosec:
-            start_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+            start_ns = messages.ns_from_time(stamp)
             ahead_s = (start_ns - self._node.get_clock().now().nanoseconds) * 1e-9
             if ahead_s > 0.1:
                 return Result.INVALID_GOAL, (
