@@ -159,11 +159,6 @@ def tf2_available() -> bool:
     return True
 
 
-def create_tip_tf(node: Any, max_rate_hz: float = MAX_RATE_HZ) -> TipTf:
-    """Attach the publishers to ``node``; see :class:`TipTf`."""
-    return TipTf(node, max_rate_hz)
-
-
 class TipTf:
     """Publishes ``joint_states``, TF and ``robot_description`` for ``node`` from ``tip/angle``.
 
