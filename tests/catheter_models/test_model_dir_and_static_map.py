@@ -19,6 +19,17 @@ def test_round_trip_and_manifest(tmp_path) -> None:
     assert payload == {"w.json": b"[1,2]"}
 
 
+def test_training_bags_are_recorded_by_name_never_by_path(tmp_path) -> None:
+    """A path is the training machine's; the manifest keeps the bag's name and hash."""
+    bags = {"/home/me/bags/training": "a" * 64, "bags/training/run_0.mcap": "b" * 64, "sim": ""}
+    write_model_dir(tmp_path / "m", "demo", {}, {}, {"w.json": b"[]"}, training_bags=bags)
+    manifest, _ = read_model_dir(tmp_path / "m")
+    assert manifest.training_bags == {"training": "a" * 64, "run_0.mcap": "b" * 64, "sim": ""}
+    clash = {"/x/training": "a" * 64, "/y/training": "c" * 64}
+    with pytest.raises(ModelDirError, match="two training bags are named 'training'"):
+        write_model_dir(tmp_path / "n", "demo", {}, {}, {"w.json": b"[]"}, training_bags=clash)
+
+
 def test_tampered_weight_file_is_refused(tmp_path) -> None:
     write_model_dir(tmp_path / "m", "demo", {}, {}, {"w.json": b"[1,2]"})
     (tmp_path / "m" / "w.json").write_bytes(b"[1,3]")

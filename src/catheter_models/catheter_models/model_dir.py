@@ -12,7 +12,7 @@ import hashlib
 import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
+from pathlib import Path, PurePath
 from typing import Any
 
 from catheter_models import __version__
@@ -85,6 +85,24 @@ def seal_manifest(content: Mapping[str, Any]) -> str:
     )
 
 
+def bag_names(training_bags: Mapping[str, str]) -> dict[str, str]:
+    """``training_bags`` keyed by bag name (the last part of a path), as manifests hold them.
+
+    A path is the training machine's and means nothing where the model ships; the bag's name
+    and hash find and prove it in any bags directory. Two different bags of one name are
+    refused: the manifest could not tell them apart.
+    """
+    named: dict[str, str] = {}
+    for key, sha in training_bags.items():
+        name = PurePath(key).name or key
+        if named.get(name, sha) != sha:
+            raise ModelDirError(
+                f"two training bags are named {name!r} with different sha256; rename one"
+            )
+        named[name] = sha
+    return named
+
+
 def write_model_dir(
     path: Path,
     kind: str,
@@ -93,8 +111,13 @@ def write_model_dir(
     payload: Mapping[str, bytes],
     **extra: Any,
 ) -> Manifest:
-    """Write weight files and a manifest that hashes them. Refuses to overwrite a model."""
+    """Write weight files and a manifest that hashes them. Refuses to overwrite a model.
+
+    Training bags are recorded by name (:func:`bag_names`), whatever the caller passed.
+    """
     path = Path(path)
+    if "training_bags" in extra:
+        extra["training_bags"] = bag_names(extra["training_bags"])
     if (path / MANIFEST).exists():
         raise ModelDirError(f"{path} already holds a model; choose a new directory")
     path.mkdir(parents=True, exist_ok=True)
