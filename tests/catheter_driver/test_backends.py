@@ -16,12 +16,14 @@ import math
 import signal
 import subprocess
 import sys
+import threading
 import time
 import uuid
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 from catheter_driver.devices.base import Device, LaserAdc
@@ -332,6 +334,45 @@ def test_keller_refuses_unknown_channel(rig: EmulatedRig) -> None:
             bench.device.read_gauge_pa()
     finally:
         bench.close()
+
+
+def test_a_late_rig_loop_neither_ages_readings_nor_backdates_set_points(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # The rig's loop thread stalls from its 5th tick on, as on a busy host, while the devices
+    # keep reading and commanding: the plant must still follow its own clock.
+    rig = EmulatedRig(PlantConfig.thesis_rig())
+    period_s = 1.0 / rig.sample_rate_hz
+    gate = threading.Event()
+    real_tick = rig._tick
+
+    def stalled_tick(k: int, deadline_s: float) -> None:
+        if k >= 5:
+            gate.wait()
+        real_tick(k, deadline_s)
+
+    monkeypatch.setattr(rig, "_tick", stalled_tick)
+    taken: list[tuple[float, float]] = []
+    rig.add_listener(lambda sample, t_s: taken.append((t_s, sample.pressure_command_pa)))
+    with rig:
+        try:
+            time.sleep(20 * period_s)
+            before_s = time.monotonic()
+            rig.measured_pressure_pa  # noqa: B018 (a transmitter's read, for its catch-up)
+            assert before_s - period_s < taken[-1][0] <= time.monotonic(), "a stale reading"
+            command_s = time.monotonic()
+            rig.command(1.0e5)
+            applied_s = time.monotonic()
+            time.sleep(10 * period_s)
+            rig.measured_pressure_pa  # noqa: B018
+        finally:
+            gate.set()
+        time.sleep(5 * period_s)  # the loop resumes and takes only the samples still due
+    instants_s = np.array([t for t, _ in taken])
+    commands_pa = np.array([c for _, c in taken])
+    assert np.allclose(np.diff(instants_s), period_s), "every sample once, at its own instant"
+    assert np.all(commands_pa[instants_s < command_s] == 0.0), "set-point acted before it came"
+    assert np.all(commands_pa[instants_s > applied_s] == pytest.approx(1.0e5))
 
 
 def test_keller_over_loop_url_hears_only_its_echo() -> None:

@@ -25,11 +25,18 @@ from catheter_models.plant import PlantConfig, PlantSample
 from catheter_ros.rt_loop import DeadlineLoop, set_process_realtime
 
 SampleListener = Callable[[PlantSample, float], None]
-"""Called on the rig's thread with each new sample and its deadline [monotonic s]."""
+"""Called with each new sample and its instant [monotonic s], in order, on the thread that
+took it: the rig's loop, or a device's serving thread that caught the plant up."""
 
 
 class EmulatedRig:
     """The simulated plant in real time, with the emulators attached to it.
+
+    The plant follows its own clock: sample ``k`` belongs to the instant ``k`` periods after
+    the loop started, whoever takes it. The deadline loop takes each on time when it can;
+    when it is late (a busy host), a device that reads the plant or sets its valve first
+    takes every sample whose instant has passed, so it reads a sample at most one period
+    old and its set-point acts from its own instant on, never on samples before it.
 
     Args:
         config: plant configuration; the thesis rig by default.
@@ -62,17 +69,25 @@ class EmulatedRig:
         self.geometry = self.hw.plant.geometry
         self.ambient_pa = float(config.rig["ambient_pressure_pa"])
         self.sample_rate_hz = float(config.rig["sample_rate_hz"])
+        self._period_s = 1.0 / self.sample_rate_hz
         self._listeners: list[SampleListener] = []
         self._emulators: list[Emulator] = []
         self._latest: PlantSample | None = None
         self._loop: DeadlineLoop | None = None
         self._lock = threading.Lock()
+        self._step_lock = threading.Lock()
+        """Held while samples are taken (by the loop or a device), so they come in order."""
+        self._origin_s: float | None = None
+        """The plant clock: sample k's instant is this + k periods [monotonic s]."""
         self._last_command_s: float | None = None
         self._vented_at_s: float | None = None
 
     # -- wiring ------------------------------------------------------------------------
     def add_listener(self, listener: SampleListener) -> None:
-        """Call ``listener`` with every sample (on the rig's thread; keep it short)."""
+        """Call ``listener`` with every sample (see :data:`SampleListener`).
+
+        Keep it short, and do not call the rig from it: it runs while samples are taken.
+        """
         with self._lock:
             self._listeners.append(listener)
 
@@ -94,6 +109,7 @@ class EmulatedRig:
         """Compile the plant, start stepping it, then start the attached emulators."""
         self.hw.plant.warm_up()
         self.hw.reset_ticks()
+        self._origin_s = None
         self._loop = DeadlineLoop(
             self.sample_rate_hz, self._tick, name="emulated-rig", rt_priority=self.rt_priority
         )
@@ -137,8 +153,30 @@ class EmulatedRig:
         # busy host it misses deadlines: 15 % with the whole emulated graph on 2 cores). After
         # an overrun, step through every missed sample, so the laser bridge streams the backlog
         # with consecutive counters as a bridge with a FIFO does, rather than a plant that
-        # skips time the sensors never saw.
-        for sample_time_s, sample in self.hw.step_through(k, deadline_s, 1.0 / self.sample_rate_hz):
+        # skips time the sensors never saw. Samples a device has already taken are not taken
+        # again (step_through counts them).
+        with self._step_lock:
+            if self._origin_s is None:
+                self._origin_s = deadline_s - k * self._period_s
+            self._take_samples(k, deadline_s)
+
+    def _catch_up(self, now_s: float) -> None:
+        """Take every sample whose instant is at or before ``now_s``; hold ``_step_lock``.
+
+        A device calls this (through :meth:`command`, :attr:`measured_pressure_pa`) before it
+        acts, so a late loop makes the laser stream late but never feeds a device an old
+        sample or applies a set-point to instants before it arrived.
+        """
+        origin_s = self._origin_s
+        if origin_s is None or self._loop is None:
+            return  # not started (or stopped): the loop's first tick sets the clock
+        k = math.floor((now_s - origin_s) / self._period_s)
+        if k > self.hw.ticks_done:
+            self._take_samples(k, origin_s + k * self._period_s)
+
+    def _take_samples(self, k: int, deadline_s: float) -> None:
+        """Every sample up to ``k`` not taken yet, to :attr:`latest` and the listeners."""
+        for sample_time_s, sample in self.hw.step_through(k, deadline_s, self._period_s):
             with self._lock:
                 self._latest = sample
                 listeners = tuple(self._listeners)
@@ -149,13 +187,15 @@ class EmulatedRig:
     def command(self, gauge_pa: float) -> bool:
         """Apply a valve set-point, gauge [Pa] (clamped; refused if not finite)."""
         now_s = time.monotonic()
-        with self._lock:
-            was_pa = self.hw.command_pa
-            ok = self.hw.command(gauge_pa, now_s)
-            if ok:
-                self._last_command_s = now_s
-                if was_pa > 0.0 and self.hw.command_pa <= 0.0:
-                    self._vented_at_s = now_s
+        with self._step_lock:  # no sample may be taken between the catch-up and the command
+            self._catch_up(now_s)
+            with self._lock:
+                was_pa = self.hw.command_pa
+                ok = self.hw.command(gauge_pa, now_s)
+                if ok:
+                    self._last_command_s = now_s
+                    if was_pa > 0.0 and self.hw.command_pa <= 0.0:
+                        self._vented_at_s = now_s
         return ok
 
     def state(self) -> dict[str, Any]:
@@ -166,9 +206,12 @@ class EmulatedRig:
         transmitter reads), ``angle_deg`` (true bend), ``distance_m`` (laser),
         ``last_command_s`` (when the latest set-point was applied) and ``vented_at_s``
         (when the set-point last dropped from above 0 to 0), monotonic [s] or None;
-        ``plant_steps`` (samples taken since start) and ``steps_caught_up`` (of those, taken
-        late because the host was busy, then streamed as a backlog).
+        ``plant_steps`` (samples taken since start) and ``steps_caught_up`` (deadlines the
+        rig's loop missed because the host was busy: their samples were taken late, by the
+        loop or by a device catching the plant up, and streamed as a backlog).
         """
+        with self._step_lock:
+            self._catch_up(time.monotonic())
         sample = self.latest
         with self._lock:
             last_s, vented_s = self._last_command_s, self._vented_at_s
@@ -196,5 +239,7 @@ class EmulatedRig:
     @property
     def measured_pressure_pa(self) -> float:
         """What the transmitter reads now, gauge [Pa] (0 before the first step: vented)."""
+        with self._step_lock:
+            self._catch_up(time.monotonic())
         sample = self.latest
         return 0.0 if sample is None else sample.pressure_measured_pa
