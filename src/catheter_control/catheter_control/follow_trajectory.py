@@ -26,6 +26,7 @@ import datetime as dt
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from catheter_control.bringup import namespace_from_ros_args, split_ros_args
 from catheter_control.live_view import LiveViewProcess, parse_port
@@ -41,6 +42,9 @@ from catheter_control.trajectory import (
 from catheter_models.contract import CONTROL_RATE_HZ, DEFAULT_NAMESPACE
 from catheter_models.errors import CatheterError, ParameterError
 from catheter_models.signals import TEST_TRAJECTORIES, get_preset
+
+if TYPE_CHECKING:
+    from catheter_control.tracking_report import RunRecord
 
 EXIT_REFUSED = 2
 """The trajectory was refused: by this tool's checks, or by the compensator."""
@@ -213,22 +217,20 @@ def _run(
     local: LocalGraph | None,
 ) -> int:
     """Follow the trajectory, then score and report it; the exit code."""
-    # Imported here, not at the top: scoring loads matplotlib (about 2 s), which a refused
-    # trajectory, or a local graph that fails to start, should not wait for.
-    from catheter_control import tracking_report as report
+    # Imported here, not at the top: the run loads the report's matplotlib (about 2 s),
+    # which a refused trajectory, or a local graph that fails to start, should not wait for.
     from catheter_control.trajectory_client import GoalRefusedError, GraphNotReadyError, follow
 
-    plan, lead_s = trajectory.plan, trajectory.lead_s
     try:
         record = follow(
-            plan,
+            trajectory.plan,
             namespace=args.namespace,
             ros_args=args.ros_args,
             timeout_s=args.timeout_s,
             graph=local.graph if local is not None else None,
             wait_for_recorder=bag_path is not None,
             show_progress=not args.no_progress,
-            lead_s=lead_s,
+            lead_s=trajectory.lead_s,
         )
     except GoalRefusedError as exc:
         print(f"follow_trajectory: {exc}", file=sys.stderr)
@@ -236,7 +238,16 @@ def _run(
     except GraphNotReadyError as exc:
         print(f"follow_trajectory: {exc}", file=sys.stderr)
         return EXIT_GRAPH
+    return _report(record, trajectory, run_dir, bag_path)
 
+
+def _report(
+    record: RunRecord, trajectory: _Trajectory, run_dir: Path, bag_path: Path | None
+) -> int:
+    """Score the run, print the report, save the plot and report.json; the exit code."""
+    from catheter_control import tracking_report as report  # loaded with the run, see _run
+
+    plan, lead_s = trajectory.plan, trajectory.lead_s
     try:
         result = report.score_record(record, plan.duration_s, lead_s)
     except report.TrackingError as exc:
