@@ -4,9 +4,12 @@ A pressure limit that can be changed in one place and not in another is a safety
 a rate typed in two places drifts. So every ``.py`` under ``src/`` (launch files included)
 except ``contract.py`` is read with ``ast`` and fails the test, naming ``file:line``, where it:
 
-* holds a number equal to ``MAX_PRESSURE_PA`` (3 bar) or ``PRESSURE_LIMIT_HARD_PA`` (6 bar),
-  in any spelling (``3.0e5``, ``3e5``, ``300_000``, ``300000.0``, ...), or a numeric string
-  equal to one as a named default (a launch argument's ``default_value``);
+* holds a number equal to ``MAX_PRESSURE_PA`` (3 bar), ``PRESSURE_LIMIT_HARD_PA`` (6 bar) or
+  ``MAX_SLEW_PA_PER_S`` (20 bar/s), in any spelling (``3.0e5``, ``3e5``, ``300_000``,
+  ``300000.0``, ...), or a numeric string equal to one as a named default (a launch
+  argument's ``default_value``);
+* gives ``COMMAND_TIMEOUT_S`` (0.1 s) to something named as the command watchdog
+  (``watchdog_s``, ``command_timeout_s``): 0.1 is too common a number to flag everywhere;
 * gives a 250 (``250``, ``250.0``, ``"250.0"``) to something named as a rate: a default of a
   function parameter, a keyword argument or a dataclass field whose name contains ``rate_hz``,
   a value assigned to a name containing ``RATE_HZ``, or the default of a declaration whose
@@ -44,8 +47,10 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from catheter_models import contract
 from catheter_models.bag import metadata
 from catheter_models.contract import (
+    COMMAND_TIMEOUT_S,
     CONTROL_RATE_HZ,
     MAX_PRESSURE_PA,
+    MAX_SLEW_PA_PER_S,
     PRESSURE_LIMIT_HARD_PA,
     SENSOR_RATE_HZ,
     QosSpec,
@@ -56,7 +61,13 @@ REPO = Path(__file__).resolve().parents[1]
 SRC = REPO / "src"
 CONTRACT_FILE = SRC / "catheter_models" / "catheter_models" / "contract.py"
 
-LIMITS = {MAX_PRESSURE_PA: "MAX_PRESSURE_PA", PRESSURE_LIMIT_HARD_PA: "PRESSURE_LIMIT_HARD_PA"}
+LIMITS = {
+    MAX_PRESSURE_PA: "MAX_PRESSURE_PA",
+    PRESSURE_LIMIT_HARD_PA: "PRESSURE_LIMIT_HARD_PA",
+    MAX_SLEW_PA_PER_S: "MAX_SLEW_PA_PER_S",
+}
+WATCHDOG_NAMES = ("watchdog_s", "command_timeout_s")
+"""Names of the command watchdog, whose typed ``COMMAND_TIMEOUT_S`` is a finding."""
 RATES = {"CONTROL_RATE_HZ": CONTROL_RATE_HZ, "SENSOR_RATE_HZ": SENSOR_RATE_HZ}
 """By name: the two rates are both 250 Hz today, and either typed is a finding."""
 
@@ -151,6 +162,8 @@ def typed_contract_numbers(source: str, filename: str = "<source>") -> list[str]
         where = (value.lineno, value.col_offset)
         if number in LIMITS:
             found[where] = f"{name} = {number:g} types contract.{LIMITS[number]}"
+        elif number == COMMAND_TIMEOUT_S and any(w in name.lower() for w in WATCHDOG_NAMES):
+            found[where] = f"{name} = {number:g} types contract.COMMAND_TIMEOUT_S"
         elif _is_rate_name(name) and number in RATES.values():
             rates = " or ".join(f"contract.{k}" for k, v in RATES.items() if v == number)
             found[where] = f"{name} = {number:g} types {rates}"
@@ -197,6 +210,9 @@ def test_no_contract_number_is_typed_outside_the_contract() -> None:
         "DeclareLaunchArgument('control_rate_hz', default_value='250.0')",
         "run(sample_rate_hz=250)",
         "class C:\n    rate_hz: float = 250.0",
+        "ParamSpec('max_slew_pa_per_s', 20.0e5, 1.0e3, 1.0e8, 'slew')",
+        "ParamSpec('watchdog_s', 0.1, 0.01, 5.0, 'vent')",
+        "def f(command_timeout_s: float = 0.1): ...",
     ],
 )
 def test_the_scanner_catches_a_typed_contract_number(source: str) -> None:
@@ -271,6 +287,21 @@ def test_every_node_s_rate_is_the_contract_s(node: str, parameter: str, rate_hz:
     assert _specs(_node_modules()[node])[parameter].default == rate_hz
 
 
+@pytest.mark.parametrize(
+    ("node", "parameter", "value"),
+    [
+        ("valve_driver", "max_slew_pa_per_s", MAX_SLEW_PA_PER_S),
+        ("compensator", "max_slew_pa_per_s", MAX_SLEW_PA_PER_S),
+        ("valve_driver", "watchdog_s", COMMAND_TIMEOUT_S),
+        ("sim_hardware", "command_timeout_s", COMMAND_TIMEOUT_S),
+    ],
+)
+def test_every_node_s_slew_and_watchdog_are_the_contract_s(
+    node: str, parameter: str, value: float
+) -> None:
+    assert _specs(_node_modules()[node])[parameter].default == value
+
+
 def test_the_simulated_rig_plant_and_evaluation_use_the_contract_s_numbers() -> None:
     from catheter_driver.sim_hardware import SimHardware
     from catheter_models.cli import build_parser
@@ -283,9 +314,11 @@ def test_the_simulated_rig_plant_and_evaluation_use_the_contract_s_numbers() -> 
     config = PlantConfig.thesis_rig()
     assert config.rig["valve_max_pressure_pa"] == MAX_PRESSURE_PA
     assert config.rig["sample_rate_hz"] == SENSOR_RATE_HZ
-    default = inspect.signature(SimHardware).parameters["max_pressure_pa"].default
-    assert default == MAX_PRESSURE_PA
+    signature = inspect.signature(SimHardware).parameters
+    assert signature["max_pressure_pa"].default == MAX_PRESSURE_PA
+    assert signature["command_timeout_s"].default == COMMAND_TIMEOUT_S
     assert evaluate.DEFAULT_MAX_PRESSURE_PA == MAX_PRESSURE_PA
+    assert evaluate.DEFAULT_MAX_SLEW_PA_PER_S == MAX_SLEW_PA_PER_S
     subcommands = next(
         a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction)
     )

@@ -44,6 +44,7 @@ from catheter_models.contract import (
     BEND_JOINT,
     CONTROL_RATE_HZ,
     MAX_PRESSURE_PA,
+    MAX_SLEW_PA_PER_S,
     PRESSURE_COMMAND,
     PRESSURE_LIMIT_HARD_PA,
     PRESSURE_MEASURED,
@@ -64,7 +65,7 @@ _PMIN = ParamSpec("min_pressure_pa", 0.0, 0.0, PRESSURE_LIMIT_HARD_PA, "lowest c
 _PMAX = ParamSpec(
     "max_pressure_pa", MAX_PRESSURE_PA, 0.0, PRESSURE_LIMIT_HARD_PA, "highest command, gauge [Pa]"
 )
-_SLEW = ParamSpec("max_slew_pa_per_s", 20.0e5, 1.0e3, 1.0e8, "command slew limit [Pa/s]")
+_SLEW = ParamSpec("max_slew_pa_per_s", MAX_SLEW_PA_PER_S, 1.0e3, 1.0e8, "command slew limit [Pa/s]")
 _AMAX = ParamSpec("max_angle_rad", deg_to_rad(35.0), 0.0, 1.18, "highest desired bend [rad]")
 _VMAX = ParamSpec(
     "max_rate_rad_s", deg_to_rad(200.0), 0.0, 100.0, "fastest desired bend rate [rad/s]"

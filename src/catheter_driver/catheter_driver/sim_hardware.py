@@ -13,7 +13,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 from catheter_driver.command_order import CommandOrder
-from catheter_models.contract import MAX_PRESSURE_PA
+from catheter_models.contract import COMMAND_TIMEOUT_S, MAX_PRESSURE_PA
 from catheter_models.plant import Plant, PlantConfig, PlantSample
 
 
@@ -50,7 +50,7 @@ class SimHardware:
         self,
         config: PlantConfig,
         max_pressure_pa: float = MAX_PRESSURE_PA,
-        command_timeout_s: float = 0.1,
+        command_timeout_s: float = COMMAND_TIMEOUT_S,
     ) -> None:
         self.plant = Plant(config)
         self.max_pressure_pa = max_pressure_pa

@@ -21,6 +21,7 @@ from sensor_msgs.msg import FluidPressure, JointState, Range
 
 from catheter_driver.sim_hardware import SimHardware
 from catheter_models.contract import (
+    COMMAND_TIMEOUT_S,
     MAX_PRESSURE_PA,
     PRESSURE_LIMIT_HARD_PA,
     PRESSURE_MEASURED,
@@ -44,7 +45,11 @@ _MAX_PRESSURE = ParamSpec(
     "safety limit: commands above clamp here, gauge [Pa]",
 )
 _TIMEOUT = ParamSpec(
-    "command_timeout_s", 0.1, 0.01, 5.0, "vent when commands stop for longer than this [s]"
+    "command_timeout_s",
+    COMMAND_TIMEOUT_S,
+    0.01,
+    5.0,
+    "vent when commands stop for longer than this [s]",
 )
 
 

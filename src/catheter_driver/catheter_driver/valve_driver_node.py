@@ -24,8 +24,10 @@ from std_srvs.srv import SetBool, Trigger
 from catheter_driver.devices.factory import make_transmitter, make_valve
 from catheter_driver.valve_core import ValveDriverCore
 from catheter_models.contract import (
+    COMMAND_TIMEOUT_S,
     CONTROL_RATE_HZ,
     MAX_PRESSURE_PA,
+    MAX_SLEW_PA_PER_S,
     PRESSURE_LIMIT_HARD_PA,
     PRESSURE_MEASURED,
 )
@@ -53,8 +55,12 @@ _PMIN = ParamSpec(
 _PMAX = ParamSpec(
     "max_pressure_pa", MAX_PRESSURE_PA, 0.0, PRESSURE_LIMIT_HARD_PA, "highest set-point, gauge [Pa]"
 )
-_SLEW = ParamSpec("max_slew_pa_per_s", 20.0e5, 1.0e3, 1.0e8, "set-point slew limit [Pa/s]")
-_WATCHDOG = ParamSpec("watchdog_s", 0.1, 0.01, 5.0, "vent when commands stop this long [s]")
+_SLEW = ParamSpec(
+    "max_slew_pa_per_s", MAX_SLEW_PA_PER_S, 1.0e3, 1.0e8, "set-point slew limit [Pa/s]"
+)
+_WATCHDOG = ParamSpec(
+    "watchdog_s", COMMAND_TIMEOUT_S, 0.01, 5.0, "vent when commands stop this long [s]"
+)
 _RECONNECT = ParamSpec("reconnect_period_s", 1.0, 0.05, 60.0, "retry a lost device this often [s]")
 _AMB = ParamSpec("ambient_pressure_pa", AMBIENT_PRESSURE_PA, 5.0e4, 1.2e5, "ambient pressure [Pa]")
 

@@ -26,6 +26,16 @@ MAX_PRESSURE_PA: Final = 3.0e5
 Every layer that can move the catheter clamps or refuses above its own ``max_pressure_pa``
 parameter, and every such parameter defaults to this one value."""
 
+MAX_SLEW_PA_PER_S: Final = 20.0e5
+"""How fast a pressure command may change (20 bar/s: 0 to 3 bar in 0.15 s, faster than any
+thesis trajectory asks). The compensator limits its command to it and the valve driver its
+set-point, so a jump from a bad model or a bad message reaches the muscle as a ramp."""
+
+COMMAND_TIMEOUT_S: Final = 0.1
+"""The watchdog: a driver that has had no pressure command for this long vents to zero
+(25 control periods at 250 Hz). The valve driver's ``watchdog_s`` and the simulated rig's
+``command_timeout_s`` default to it."""
+
 PRESSURE_LIMIT_HARD_PA: Final = 6.0e5
 """The highest value any ``max_pressure_pa`` parameter accepts (6 bar): beyond it a typo, not a
 choice. The muscle's rated pressure on the thesis's rig."""

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from catheter_models.contract import MAX_PRESSURE_PA
+from catheter_models.contract import MAX_PRESSURE_PA, MAX_SLEW_PA_PER_S
 from catheter_models.metrics import ErrorMetrics, compute_metrics
 from catheter_models.models.base import FloatArray, Model, Recording, Stream
 from catheter_models.plant import Plant, PlantConfig
@@ -25,7 +25,7 @@ from catheter_models.signals import SignalSpec, get_preset
 # keep a benchmark honest about what the node would have commanded. The ceiling is the
 # contract's, which the node's default reads too.
 DEFAULT_MAX_PRESSURE_PA = MAX_PRESSURE_PA
-DEFAULT_MAX_SLEW_PA_PER_S = 20.0e5
+DEFAULT_MAX_SLEW_PA_PER_S = MAX_SLEW_PA_PER_S
 
 
 @dataclass(frozen=True, eq=False)
