@@ -56,7 +56,7 @@ from catheter_models.plant.config import ParamSpec
 from catheter_models.units import AMBIENT_PRESSURE_PA, deg_to_rad
 from catheter_ros import diagnostics, messages, qos
 from catheter_ros.loop_node import LifecycleLoopNode
-from catheter_ros.node_main import run_node
+from catheter_ros.node_main import run_node_as_main
 from catheter_ros.params import declare_float, declare_plain
 from catheter_ros.polled import PolledTopics
 
@@ -573,9 +573,7 @@ class CompensatorNode(LifecycleLoopNode):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run catheter_control compensator``."""
-    code = run_node(CompensatorNode, args)
-    if code:
-        raise SystemExit(code)
+    run_node_as_main(CompensatorNode, args)
 
 
 if __name__ == "__main__":

@@ -39,7 +39,7 @@ from catheter_models.errors import ParameterError
 from catheter_models.gaps import StreamGaps, header_stamp_ns, pauses_between_runs
 from catheter_ros import diagnostics, qos
 from catheter_ros.messages import message_class
-from catheter_ros.node_main import run_node
+from catheter_ros.node_main import run_node_as_main
 from catheter_ros.params import declare_plain
 from catheter_ros.rt_loop import set_process_realtime
 
@@ -360,9 +360,7 @@ class RecorderNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run catheter_control recorder``."""
-    code = run_node(RecorderNode, args, events_executor=True)
-    if code:
-        raise SystemExit(code)
+    run_node_as_main(RecorderNode, args, events_executor=True)
 
 
 if __name__ == "__main__":

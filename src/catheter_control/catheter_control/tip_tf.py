@@ -32,7 +32,7 @@ from catheter_models.contract import BEND_JOINT, TIP_ANGLE
 from catheter_models.errors import ParameterError
 from catheter_ros import qos
 from catheter_ros.messages import angle_rad_from, ns_from_time
-from catheter_ros.node_main import run_node
+from catheter_ros.node_main import run_node_as_main
 
 URDF_RESOURCE: Final = "urdf/catheter.urdf"
 """The model inside the ``catheter_control`` package (also installed to ``share/``)."""
@@ -262,9 +262,7 @@ class TipTfNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run catheter_control tip_tf``."""
-    code = run_node(TipTfNode, args)
-    if code:
-        raise SystemExit(code)
+    run_node_as_main(TipTfNode, args)
 
 
 if __name__ == "__main__":
