@@ -268,3 +268,18 @@ def test_a_new_goal_preempts_the_running_one(rig: Rig) -> None:
     assert "pre-empted" in first_result.result.error_string
     rig.runner.run_to_end()
     assert rig.result(second).result.error_code == Result.SUCCESSFUL
+
+
+def test_follow_trajectory_s_goal_keeps_each_knot_s_time_to_the_nanosecond() -> None:
+    import numpy as np
+
+    from catheter_control.trajectory_client import _goal
+
+    # A knot half a nanosecond below a whole second rounds up to it; rounding the fraction
+    # alone once sent it as (that second - 1, 0 ns), a whole second early.
+    t_s = np.array([0.0, 0.9999999999, 1.5, 2.0000000004, 61.25])
+    plan = TrajectoryPlan(t_s=t_s, angle_rad=np.linspace(0.0, 0.2, t_s.size))
+    points = _goal(plan).trajectory.points
+    sent = [(p.time_from_start.sec, p.time_from_start.nanosec) for p in points]
+    assert sent == [(0, 0), (1, 0), (1, 500_000_000), (2, 0), (61, 250_000_000)]
+    assert all(0 <= ns < 1_000_000_000 for _, ns in sent)

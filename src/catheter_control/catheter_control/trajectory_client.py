@@ -287,7 +287,10 @@ def _goal(plan: TrajectoryPlan) -> Any:
     for t, a in zip(plan.t_s, plan.angle_rad, strict=True):
         point = JointTrajectoryPoint()
         point.positions = [float(a)]
-        point.time_from_start.sec = math.floor(t)
-        point.time_from_start.nanosec = s_to_ns(t - math.floor(t)) % NS_PER_S
+        # Split the rounded whole: rounding the fraction alone turned a knot within half a
+        # nanosecond below a whole second into (that second - 1, 0 ns), a second early.
+        sec, nanosec = divmod(s_to_ns(t), NS_PER_S)
+        point.time_from_start.sec = sec
+        point.time_from_start.nanosec = nanosec
         goal.trajectory.points.append(point)
     return goal
