@@ -45,7 +45,7 @@ demo: setup-runtime
 
 ## All tests, the slow integration tests included (this is what .ci/run calls).
 test: setup
-	$(BIN)/pytest -m "slow or not slow"
+	$(BIN)/pytest -m "slow or not slow" --durations=25
 
 ## All tests beside two busy-loop processes: the suite must hold on a shared machine.
 test-loaded: setup
