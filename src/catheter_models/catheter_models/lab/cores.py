@@ -786,13 +786,9 @@ class DRDPICore(_ThesisCore):
 
     @staticmethod
     def _run_coef(coef: FloatArray, x: FloatArray) -> FloatArray:
-        from catheter_models.hysteresis import operators as op
+        from catheter_models.models.drdpi import run_chain  # the DRDPI model's own runner
 
-        y = np.empty(x.size)
-        op.chain_run(
-            np.ascontiguousarray(x, dtype=np.float64), coef, np.zeros(op.chain_state_size(coef)), y
-        )
-        return y
+        return run_chain(coef, x)
 
     def run(self, x: FloatArray, rate_hz: float) -> FloatArray:
         """Bend [deg] from rest."""
