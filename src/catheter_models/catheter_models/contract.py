@@ -37,8 +37,8 @@ COMMAND_TIMEOUT_S: Final = 0.1
 ``command_timeout_s`` default to it."""
 
 PRESSURE_LIMIT_HARD_PA: Final = 6.0e5
-"""The highest value any ``max_pressure_pa`` parameter accepts (6 bar): beyond it a typo, not a
-choice. The muscle's rated pressure on the thesis's rig."""
+"""The highest value any ``max_pressure_pa`` parameter accepts (6 bar, twice the thesis's
+span, the top of the 0-6 bar valve modules' range): beyond it a typo, not a choice."""
 
 
 STREAM_DEPTH: Final = 500
