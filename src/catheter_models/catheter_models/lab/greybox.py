@@ -53,6 +53,7 @@ from catheter_models.models.base import (
     Recording,
     as_input,
     check_finite_step,
+    saved_rate_hz,
 )
 from catheter_models.models.drdpi import DRDPI
 from catheter_models.models.evaluate import pooled_rmse
@@ -393,12 +394,10 @@ class GreyBox(Model):
                 "refit it (catheter-lab add / train greybox)"
             )
         blocks = {e: block(e).check(raw_blocks[e]) for e in model.effects}
-        rate = manifest.metrics.get("rate_hz")
-        if not isinstance(rate, (int, float)):
-            raise ModelError("greybox manifest metrics lack a valid 'rate_hz'")
+        rate_hz = saved_rate_hz(manifest, "greybox")
         core = make_core(name, settings)
         core.load_values(values)
-        model._set(core, blocks, float(rate))
+        model._set(core, blocks, rate_hz)
         return model
 
 
