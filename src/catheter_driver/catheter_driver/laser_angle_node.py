@@ -46,10 +46,12 @@ from catheter_ros.params import declare_float, declare_plain
 from catheter_ros.rt_loop import DeadlineLoop, MonotonicStamper
 
 _RATE = ParamSpec("rate_hz", SENSOR_RATE_HZ, 10.0, 5000.0, "the ADC bridge's sample rate [Hz]")
-_M = ParamSpec("laser.m_per_v", 4.05e-3, 1e-4, 0.1, "eq. 3.1 slope m [m/V]")
-_N = ParamSpec("laser.offset_m", 29.36e-3, 0.0, 1.0, "eq. 3.1 offset n [m]")
-_L = ParamSpec("laser.length_m", 0.077, 1e-3, 1.0, "eq. 3.3 bending length L [m]")
-_H = ParamSpec("laser.height_m", 0.065, 1e-3, 1.0, "eq. 3.3 sensor height H [m]")
+# The thesis's geometry is LaserGeometry's defaults; the parameters start from them.
+_THESIS = LaserGeometry()
+_M = ParamSpec("laser.m_per_v", _THESIS.m_per_v, 1e-4, 0.1, "eq. 3.1 slope m [m/V]")
+_N = ParamSpec("laser.offset_m", _THESIS.offset_m, 0.0, 1.0, "eq. 3.1 offset n [m]")
+_L = ParamSpec("laser.length_m", _THESIS.length_m, 1e-3, 1.0, "eq. 3.3 bending length L [m]")
+_H = ParamSpec("laser.height_m", _THESIS.height_m, 1e-3, 1.0, "eq. 3.3 sensor height H [m]")
 _ZERO_S = ParamSpec("zero_duration_s", 1.0, 0.1, 30.0, "how long ~/zero averages [s]")
 _ZERO_PA = ParamSpec(
     "zero_max_pressure_pa", 0.05e5, 0.0, 1.0e5, "~/zero refuses above this line pressure [Pa]"
