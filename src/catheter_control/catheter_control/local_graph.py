@@ -25,9 +25,7 @@ from catheter_control.bringup import (
 from catheter_control.models import SHIPPED
 from catheter_models.errors import CatheterError
 from catheter_models.geometry import Calibration
-
-_PLANT_STRAIGHT_DISTANCE_M = 0.065
-"""The simulated rig's laser distance with the tip straight (plant rig parameter default)."""
+from catheter_models.plant import PlantConfig
 
 _LOOP_NODES = frozenset({"sim_hardware", "compensator", "valve_driver", "laser_angle"})
 """Nodes with deadline loops, which take ``rt_priority``."""
@@ -112,7 +110,8 @@ def start_local_graph(
         # The emulated laser is taken as zeroed at the plant's straight-tip distance,
         # as ~/zero would measure it with the muscle vented.
         calibration = run_dir / "laser_calibration.json"
-        Calibration(_PLANT_STRAIGHT_DISTANCE_M, 0.0, 0, "emulated rig").save(calibration)
+        straight_m = PlantConfig.thesis_rig().rig["straight_distance_m"]
+        Calibration(straight_m, 0.0, 0, "emulated rig").save(calibration)
         recorder, _sim, compensator = specs
         specs = [recorder, *driver_specs(ports, calibration), compensator]
     if args.rt_priority is not None:
@@ -125,7 +124,9 @@ def start_local_graph(
     try:
         graph.start()
     except CatheterError as exc:  # a node failed configure/activate, or exited
-        # The graph stopped its own nodes; the emulated devices are left as they were
-        # (the process ends on this error).
+        # The graph stopped its own nodes; the emulated devices go too. Left running, the
+        # rig process outlived follow_trajectory and held its output pipe open.
+        if devices is not None:
+            devices.stop()
         raise LocalGraphError(str(exc)) from exc
     return LocalGraph(graph, devices)
