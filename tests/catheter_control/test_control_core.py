@@ -1,4 +1,4 @@
-"""The compensator's tick: plan following, clamping, slew limit, ramp-down, pre-emption."""
+"""The compensator's tick: following a plan, holding its end, clamping, slew, ramp-down."""
 
 import math
 
@@ -302,3 +302,119 @@ def test_feedback_in_the_core_tracks_the_rig_at_250_hz_and_1_khz(loop_hz: float)
 
     open_loop, closed = rmse_deg(False), rmse_deg(True)
     assert closed < 0.35 * open_loop, (open_loop, closed)
+
+
+def hold_plan(end_deg: float = 15.0, duration_s: float = 1.0) -> TrajectoryPlan:
+    """A rise from rest that ends at ``end_deg``: its last point is the one held."""
+    t = np.array([0.0, duration_s])
+    return TrajectoryPlan.from_knots(t, np.radians([0.0, end_deg]), TrajectoryLimits(), RATE_HZ)
+
+
+def test_after_its_end_the_plan_s_last_point_is_held_until_the_timeout() -> None:
+    core = ControlCore(LinearCompensator(), 0.0, 3e5, 2e5, hold_timeout_s=2.0)
+    plan = hold_plan(15.0)
+    core.start(plan, 0.0)
+    outs = run(core, 0.0, int(2.9 * RATE_HZ))  # the plan, then 1.9 s of the hold
+    assert core.state == ControlCore.HOLDING
+    assert core.ended == (plan, ""), "a plan that ran to its end ended well"
+    assert core.hold_angle_rad == pytest.approx(math.radians(15.0))
+    assert core.held_s(2.9) == pytest.approx(1.9)
+    held = [o for o in outs[int(1.1 * RATE_HZ) :] if o is not None]
+    assert all(o.state == ControlCore.HOLDING for o in held)
+    assert all(o.pressure_pa == pytest.approx(1.5e5) for o in held), "the hold lets go"
+    assert all(o.angle_desired_rad == pytest.approx(math.radians(15.0)) for o in held)
+    # Past hold_timeout_s it ramps down at the slew limit and says why.
+    after = [o for o in run(core, 2.9 + DT, int(1.0 * RATE_HZ)) if o is not None]
+    assert core.state == ControlCore.IDLE and after[-1].pressure_pa == 0.0
+    assert np.all(np.diff([o.pressure_pa for o in after]) >= -2e5 * DT - 1e-6)
+    assert core.ended is not None and "hold_timeout_s (2 s)" in core.ended[1]
+
+
+def test_no_hold_with_a_zero_timeout_ramps_down_at_the_end() -> None:
+    core = ControlCore(LinearCompensator(), 0.0, 3e5, 1e7, hold_timeout_s=0.0)
+    plan = hold_plan(15.0)
+    core.start(plan, 0.0)
+    run(core, 0.0, int(1.2 * RATE_HZ))
+    assert core.state == ControlCore.IDLE and core.ended == (plan, "")
+
+
+@pytest.mark.parametrize("bad_s", [-1.0, math.inf, math.nan])
+def test_a_hold_timeout_must_be_finite(bad_s: float) -> None:
+    with pytest.raises(ValueError, match="hold_timeout_s"):
+        ControlCore(LinearCompensator(), 0.0, 3e5, 1e7, hold_timeout_s=bad_s)
+
+
+def test_the_hold_never_leaves_the_pressure_range() -> None:
+    # The compensator asks 4.5 bar for the held 15 deg: the hold clamps at 3 bar, and a
+    # floor of 0.2 bar holds too.
+    core = ControlCore(
+        LinearCompensator(3e5 / math.radians(10)), 0.2e5, 3e5, 1e8, hold_timeout_s=5.0
+    )
+    core.start(hold_plan(15.0), 0.0)
+    outs = [o for o in run(core, 0.0, int(3.0 * RATE_HZ)) if o is not None]
+    held = [o.pressure_pa for o in outs if o.state == ControlCore.HOLDING]
+    assert len(held) > RATE_HZ and max(held) == pytest.approx(3e5) and min(held) >= 0.2e5
+
+
+@pytest.mark.parametrize("how", ["stop", "fault"])
+def test_a_stop_or_a_stale_sensor_during_the_hold_ramps_down_and_says_why(how: str) -> None:
+    core = ControlCore(LinearCompensator(), 0.0, 3e5, 2e5, hold_timeout_s=60.0)
+    plan = hold_plan(15.0)
+    core.start(plan, 0.0)
+    run(core, 0.0, int(1.5 * RATE_HZ))
+    assert core.state == ControlCore.HOLDING
+    why = "tip/angle stale: no sample for 120 ms (limit 100 ms)"
+    if how == "stop":
+        core.stop()
+    else:
+        core.fault(why)
+    outs = [o for o in run(core, 1.5, int(1.5 * RATE_HZ)) if o is not None]
+    p = np.array([o.pressure_pa for o in outs])
+    assert np.all(np.diff(p) <= 0.0) and np.all(np.diff(p) >= -2e5 * DT - 1e-6)
+    assert p[-1] == 0.0 and core.state == ControlCore.IDLE
+    expected = "stopped on request" if how == "stop" else why
+    assert core.ended is not None and core.ended[0] is plan and expected in core.ended[1]
+    assert core.fault_reason == ("" if how == "stop" else why)
+
+
+def test_a_plan_started_from_the_hold_goes_on_with_the_compensator_s_memory() -> None:
+    comp = SampledCompensator()
+    core = ControlCore(comp, 0.0, 3e5, 1e12, hold_timeout_s=60.0)
+    first = hold_plan(15.0)
+    core.start(first, 0.0)
+    before = [o.pressure_pa for o in run(core, 0.0, int(1.5 * RATE_HZ))]
+    t = np.array([0.0, 1.0])
+    second = TrajectoryPlan.from_knots(t, np.radians([15.0, 10.0]), TrajectoryLimits(), RATE_HZ)
+    core.start(second, 1.5)
+    assert comp.resets == 1, "going on from a hold must not wipe the hysteresis state"
+    assert core.ended is not None and core.ended[0] is first
+    assert "pre-empted" in core.ended[1]
+    after = [o.pressure_pa for o in run(core, 1.5, 3)]
+    assert after[0] == pytest.approx(before[-1]), "no jump from the hold to the new plan"
+    assert core.state == ControlCore.FOLLOWING
+
+
+def test_feedback_holds_the_rig_at_the_last_point() -> None:
+    """The shipped static inverse with feedback on the simulated rig: through a 3 s hold the
+    bend stays at the plan's last point (without the hold it would fall back to rest)."""
+    from catheter_control.models import load_compensator, load_feedback
+    from catheter_models.plant import Plant, PlantConfig
+
+    core = ControlCore(
+        load_compensator("none", ""),
+        0.0,
+        3.0e5,
+        20.0e5,
+        load_feedback("pi", "", "", RATE_HZ),
+        hold_timeout_s=10.0,
+    )
+    plant = Plant(PlantConfig.thesis_rig())
+    core.start(hold_plan(15.0, duration_s=2.0), 0.0)
+    angles, angle = [], 0.0
+    for k in range(int(5.0 * RATE_HZ)):
+        out = core.tick(k * DT, DT, angle)
+        angle = plant.step(0.0 if out is None else out.pressure_pa).angle_rad
+        angles.append(angle)
+    assert core.state == ControlCore.HOLDING
+    hold = np.degrees(angles[int(3.0 * RATE_HZ) :])  # 1 s into the hold, to its end
+    assert np.all(np.abs(hold - 15.0) < 0.5), (hold.min(), hold.max())

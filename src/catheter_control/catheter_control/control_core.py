@@ -4,9 +4,11 @@ Every tick takes the desired bend at the current time, asks the streaming compen
 pressure, adds the feedback on the measured bend when there is one
 (:class:`~catheter_models.feedback.PIDFeedback`), then clamps it to the configured range and
 limits its slew (:func:`~catheter_models.feedback.limit_window`, the one rule for both).
-Once the plan has run out (or a stop was asked for, or a required sensor went stale) it
-ramps the pressure down to zero at the slew limit and goes idle: the valve driver's
-watchdog does the rest.
+Once the plan has run out it holds the plan's last point: the same compensator and
+feedback go on commanding that bend, as ros2_controllers' trajectory controller holds its
+last point, until a new plan replaces the hold or ``hold_timeout_s`` has passed. When a hold
+times out, a stop is asked for or a required sensor goes stale, it ramps the pressure down
+to zero at the slew limit and goes idle: the valve driver's watchdog does the rest.
 
 A model fitted at one sample rate is stepped at that rate whatever the loop's rate: it reads
 the plan at its own sample instants (the plan is known ahead, so it can step one sample early)
@@ -78,12 +80,16 @@ class ControlCore:
         compensator: the feedforward compensator.
         min_pressure_pa, max_pressure_pa: command range, gauge [Pa]; never left.
         max_slew_pa_per_s: command slew limit [Pa/s].
-        feedback: feedback on the measured bend while following a plan (None: open loop).
-            It acts only on samples given to :meth:`tick`; a ramp-down is never corrected.
+        feedback: feedback on the measured bend while following a plan or holding its last
+            point (None: open loop). It acts only on samples given to :meth:`tick`; a
+            ramp-down is never corrected.
+        hold_timeout_s: how long the last point of a plan is held before the pressure ramps
+            down [s]; 0: no hold, the ramp-down starts at the plan's end.
     """
 
     IDLE = "idle"
     FOLLOWING = "following"
+    HOLDING = "holding"
     RAMPING_DOWN = "ramping_down"
 
     _PHASE_TOLERANCE = 1e-6
@@ -97,7 +103,12 @@ class ControlCore:
         max_pressure_pa: float,
         max_slew_pa_per_s: float,
         feedback: PIDFeedback | None = None,
+        *,
+        hold_timeout_s: float = 0.0,
     ) -> None:
+        if not (math.isfinite(hold_timeout_s) and hold_timeout_s >= 0.0):
+            # A hold that never ends would keep the catheter bent after its client is gone.
+            raise ValueError(f"hold_timeout_s must be finite and >= 0 s, got {hold_timeout_s}")
         if not 0.0 <= min_pressure_pa <= max_pressure_pa:
             raise ValueError(
                 "need 0 <= min_pressure_pa <= max_pressure_pa, "
@@ -111,8 +122,10 @@ class ControlCore:
         self.min_pressure_pa = min_pressure_pa
         self.max_pressure_pa = max_pressure_pa
         self.max_slew_pa_per_s = max_slew_pa_per_s
+        self.hold_timeout_s = hold_timeout_s
         self.plan: TrajectoryPlan | None = None
         self._start_s = 0.0
+        self._hold_start_s = 0.0
         self._last_pa = 0.0
         self._last_target_pa = 0.0
         self._last_angle = 0.0
@@ -129,20 +142,37 @@ class ControlCore:
         self.model_steps = 0
         """Compensator steps taken (one per model sample, not per tick)."""
         self.ended: tuple[TrajectoryPlan, str] | None = None
-        """The newest plan that stopped being followed, and why: '' when it ran to its end,
-        else the reason it was cut short. A plan pre-empted by :meth:`start` does not end."""
+        """The newest plan that stopped being followed, and why: '' when it ran to its end
+        (and while its last point is held), else the reason it was cut short, or the reason
+        its hold ended (timed out, stopped, a sensor went stale, replaced by a new plan). A
+        plan pre-empted by :meth:`start` while it is still being followed does not end."""
 
     def _end(self, why: str) -> None:
-        if self.state == self.FOLLOWING and self.plan is not None:
+        if self.state in (self.FOLLOWING, self.HOLDING) and self.plan is not None:
             self.ended = (self.plan, why)
+
+    @property
+    def hold_angle_rad(self) -> float | None:
+        """The bend being held after a plan's end [rad], or None when not holding."""
+        if self.state != self.HOLDING or self.plan is None:
+            return None
+        return float(self.plan.angle_rad[-1])
+
+    def held_s(self, now_s: float) -> float:
+        """How long the current hold has lasted at ``now_s`` [s] (0 when not holding)."""
+        return now_s - self._hold_start_s if self.state == self.HOLDING else 0.0
 
     def start(self, plan: TrajectoryPlan, now_s: float) -> None:
         """Follow ``plan`` from ``now_s``; pre-empts any plan in progress.
 
-        The compensator is reset only from rest: pre-empting mid-motion keeps its memory of
-        the catheter's current state, which a hysteresis compensator needs. The new plan's
-        model clock starts at the command in force, so the switch has no jump but the slew.
+        The compensator is reset only from rest: pre-empting mid-motion or a hold keeps its
+        memory of the catheter's current state, which a hysteresis compensator needs. The new
+        plan's model clock starts at the command in force, so the switch has no jump but the
+        slew. Where the new plan may start is the caller's rule (the node's: at the held bend,
+        or from rest once the hold is released).
         """
+        if self.state == self.HOLDING:
+            self._end("pre-empted by a newer trajectory while its last point was held")
         if self.state == self.IDLE:
             self.compensator.reset()
             if self.feedback is not None:
@@ -154,15 +184,15 @@ class ControlCore:
         else:
             # Mid-motion: interpolate from the target in force to the new plan's next sample.
             self._y1 = self._last_target_pa
-            self._primed = self.state == self.FOLLOWING
+            self._primed = self.state in (self.FOLLOWING, self.HOLDING)
         self._k = -1 if self._primed else 0
         self.plan = plan
         self._start_s = now_s
         self.state = self.FOLLOWING
 
-    def stop(self) -> None:
-        """Ramp down to zero pressure at the slew limit, then idle."""
-        self._end("stopped on request; pressure ramped down")
+    def stop(self, why: str = "stopped on request; pressure ramped down") -> None:
+        """Ramp down to zero pressure at the slew limit, then idle (``why`` ends the plan)."""
+        self._end(why)
         if self.state != self.IDLE:
             self.state = self.RAMPING_DOWN
 
@@ -214,12 +244,17 @@ class ControlCore:
         if self.state == self.IDLE:
             return None
         target = 0.0
-        if self.state == self.FOLLOWING and self.plan is not None:
+        if self.state in (self.FOLLOWING, self.HOLDING) and self.plan is not None:
             elapsed = now_s - self._start_s
-            if elapsed > self.plan.duration_s:
+            if self.state == self.FOLLOWING and elapsed > self.plan.duration_s:
                 self._end("")
+                # Past its end the plan reads its last point: following it on is the hold.
+                self.state = self.HOLDING if self.hold_timeout_s > 0.0 else self.RAMPING_DOWN
+                self._hold_start_s = self._start_s + self.plan.duration_s
+            if self.state == self.HOLDING and now_s - self._hold_start_s > self.hold_timeout_s:
+                self._end(f"hold released after hold_timeout_s ({self.hold_timeout_s:g} s)")
                 self.state = self.RAMPING_DOWN
-            else:
+            if self.state in (self.FOLLOWING, self.HOLDING):
                 self._last_angle = self.plan.desired_at(elapsed)
                 try:
                     target = self._target_at(self.plan, elapsed)
@@ -243,7 +278,7 @@ class ControlCore:
         low, high = limit_window(
             self._last_pa, floor, self.max_pressure_pa, self.max_slew_pa_per_s * dt_s
         )
-        if self.state == self.FOLLOWING and self.feedback is not None:
+        if self.state in (self.FOLLOWING, self.HOLDING) and self.feedback is not None:
             command = self.feedback.command(
                 self._last_angle,
                 angle_measured_rad,
