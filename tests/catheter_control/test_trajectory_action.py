@@ -3,7 +3,8 @@
 The fake stands for the compensator's narrow interface (submit, progress, stop) with a plan
 clock the test moves by hand, so each outcome a client relies on is reached on purpose:
 success, a refusal with the compensator's reason, a path-tolerance abort that stops the
-catheter, a cancel that ends only once the pressure is down, and pre-emption.
+catheter, a cancel that ends only once the pressure is down, pre-emption, and the goal
+tolerance judged while the compensator holds the last point.
 """
 
 from __future__ import annotations
@@ -43,9 +44,12 @@ TIMEOUT_S = 20.0  # generous: the machine may be busy; every wait ends as soon a
 class FakeRunner:
     """The compensator as the server sees it; the test moves plan time and ends plans."""
 
+    hold_timeout_s = 60.0
+
     def __init__(self) -> None:
         self.pending: TrajectoryPlan | None = None
         self.following: TrajectoryPlan | None = None
+        self.holding: TrajectoryPlan | None = None
         self.elapsed_s = 0.0
         self.ended: list[tuple[TrajectoryPlan, str]] = []
         self.pressure_down = True
@@ -69,7 +73,11 @@ class FakeRunner:
             following=self.following,
             elapsed_s=self.elapsed_s,
             ended=tuple(self.ended),
-            idle=self.pending is None and self.following is None and self.pressure_down,
+            idle=self.pending is None
+            and self.following is None
+            and self.holding is None
+            and self.pressure_down,
+            holding=self.holding,
         )
 
     def stop_trajectory(self) -> None:
@@ -77,23 +85,30 @@ class FakeRunner:
         if self.pending is not None:
             self.ended.append((self.pending, "stopped before it started"))
             self.pending = None
-        if self.following is not None:
-            self.ended.append((self.following, "stopped on request; pressure ramped down"))
-            self.following = None
-            self.pressure_down = False  # the ramp takes a while
+        for plan in (self.following, self.holding):
+            if plan is not None:
+                self.ended.append((plan, "stopped on request; pressure ramped down"))
+                self.pressure_down = False  # the ramp takes a while
+        self.following = self.holding = None
 
     # what the control thread does
     def start(self) -> TrajectoryPlan:
         assert self.pending is not None
+        if self.holding is not None:
+            self.ended.append(
+                (self.holding, "pre-empted by a newer trajectory while its last point was held")
+            )
+            self.holding = None
         self.following, self.pending, self.elapsed_s = self.pending, None, 0.0
         self.pressure_down = False
         return self.following
 
-    def run_to_end(self) -> None:
+    def run_to_end(self, past_s: float = 0.0) -> None:
+        """The plan ran to its end ``past_s`` ago; its last point is held since."""
         assert self.following is not None
-        self.elapsed_s = self.following.duration_s
+        self.elapsed_s = self.following.duration_s + past_s
         self.ended.append((self.following, ""))
-        self.following = None
+        self.holding, self.following = self.following, None
 
 
 @dataclass
@@ -283,3 +298,121 @@ def test_follow_trajectory_s_goal_keeps_each_knot_s_time_to_the_nanosecond() -> 
     sent = [(p.time_from_start.sec, p.time_from_start.nanosec) for p in points]
     assert sent == [(0, 0), (1, 0), (1, 500_000_000), (2, 0), (61, 250_000_000)]
     assert all(0 <= ns < 1_000_000_000 for _, ns in sent)
+
+
+HOLD_15 = [(1.0, 15.0)]
+"""From rest up to 15 deg, which is then held."""
+
+
+def goal_held_at_15(goal_time_s: float = 1.0) -> Any:
+    goal = goal_of(HOLD_15)
+    goal.goal_tolerance = [JointTolerance(name=BEND_JOINT, position=math.radians(2.0))]
+    goal.goal_time_tolerance = Duration(
+        sec=int(goal_time_s), nanosec=round((goal_time_s % 1.0) * 1e9)
+    )
+    return goal
+
+
+def start_held_goal(rig: Rig, goal: Any, feedback: list[Any] | None = None) -> Any:
+    """Send ``goal`` (a goal tolerance needs a fresh tip angle), start it, run it to its end."""
+    rig.publish_tip(0.0)
+    rig.spin_until(lambda: rig.node.count_subscribers(TIP_ANGLE.name) > 0)
+    future = rig.client.send_goal_async(
+        goal, feedback_callback=None if feedback is None else feedback.append
+    )
+    rig.spin_until(lambda: (rig.publish_tip(0.0), future.done())[1])
+    handle = future.result()
+    assert handle is not None and handle.accepted
+    rig.spin_until(lambda: rig.runner.pending is not None)
+    rig.runner.start()
+    rig.runner.run_to_end()
+    return handle
+
+
+def test_the_goal_tolerance_is_judged_on_the_held_last_point(rig: Rig) -> None:
+    feedback: list[Any] = []
+    handle = start_held_goal(rig, goal_held_at_15(), feedback)
+    result_future = handle.get_result_async()
+    # Still on its way up, 4 deg short: the goal time has not passed, so no verdict yet;
+    # meanwhile the feedback shows the held point as the one desired.
+    for _ in range(5):
+        rig.publish_tip(math.radians(11.0))
+        rig.executor.spin_once(timeout_sec=0.02)
+    assert not result_future.done(), "judged before the goal time had passed"
+    rig.spin_until(lambda: any(f.feedback.actual.positions for f in feedback))
+    held = [f.feedback for f in feedback if f.feedback.actual.positions][-1]
+    assert held.desired.positions[0] == pytest.approx(math.radians(15.0))
+    assert held.index == 0
+    rig.spin_until(lambda: (rig.publish_tip(math.radians(14.0)), result_future.done())[1])
+    assert result_future.result().result.error_code == Result.SUCCESSFUL
+    # The hold is the compensator's to keep after the result: nothing released it.
+    assert rig.runner.stops == 0 and rig.runner.holding is not None
+
+
+def test_a_held_point_missed_for_the_whole_goal_time_violates_the_goal_tolerance(
+    rig: Rig,
+) -> None:
+    handle = start_held_goal(rig, goal_held_at_15(goal_time_s=0.3))
+    result_future = handle.get_result_async()
+    rig.spin_until(lambda: (rig.publish_tip(math.radians(10.0)), result_future.done())[1])
+    result = result_future.result().result
+    assert result.error_code == Result.GOAL_TOLERANCE_VIOLATED
+    assert "-5.00 deg off the last point 0.3 s after the end" in result.error_string
+
+
+def test_the_goal_time_runs_from_the_plan_s_end_not_from_when_it_was_seen(rig: Rig) -> None:
+    handle = start_held_goal(rig, goal_held_at_15(goal_time_s=1.0))
+    rig.runner.elapsed_s += 5.0  # the timer first looks 5 s after the end
+    result_future = handle.get_result_async()
+    rig.spin_until(lambda: (rig.publish_tip(math.radians(10.0)), result_future.done())[1])
+    assert result_future.result().result.error_code == Result.GOAL_TOLERANCE_VIOLATED
+
+
+def test_a_hold_that_ends_during_the_goal_time_aborts_with_its_reason(rig: Rig) -> None:
+    handle = start_held_goal(rig, goal_held_at_15())
+    plan = rig.runner.holding
+    assert plan is not None
+    rig.runner.holding = None
+    rig.runner.ended.append((plan, "tip/angle stale: no sample for 120 ms (limit 100 ms)"))
+    result = rig.result(handle).result
+    assert result.error_code == Result.INVALID_GOAL
+    assert result.error_string.startswith("tip/angle stale")
+
+
+def test_cancel_during_the_goal_time_releases_the_hold(rig: Rig) -> None:
+    handle = start_held_goal(rig, goal_held_at_15())
+    cancel = handle.cancel_goal_async()
+    rig.spin_until(cancel.done)
+    assert rig.runner.stops == 1 and rig.runner.holding is None
+    result_future = handle.get_result_async()
+    rig.executor.spin_once(timeout_sec=0.2)
+    assert not result_future.done(), "canceled while the pressure was still ramping down"
+    rig.runner.pressure_down = True
+    rig.spin_until(result_future.done)
+    assert result_future.result().status == 5  # GoalStatus.STATUS_CANCELED
+
+
+def test_a_new_goal_during_the_goal_time_pre_empts_the_held_one(rig: Rig) -> None:
+    first = start_held_goal(rig, goal_held_at_15())
+    second = rig.send(goal_of([(0.0, 15.0), (1.0, 10.0)]))
+    rig.spin_until(lambda: rig.runner.pending is not None)
+    rig.runner.start()
+    first_result = rig.result(first).result
+    assert first_result.error_code == Result.INVALID_GOAL
+    assert "pre-empted" in first_result.error_string
+    rig.runner.run_to_end()
+    assert rig.result(second).result.error_code == Result.SUCCESSFUL
+
+
+def test_a_goal_time_longer_than_the_hold_is_refused(rig: Rig) -> None:
+    rig.runner.hold_timeout_s = 0.5
+    rig.publish_tip(0.0)
+    rig.spin_until(lambda: rig.node.count_subscribers(TIP_ANGLE.name) > 0)
+    future = rig.client.send_goal_async(goal_held_at_15(goal_time_s=1.0))
+    rig.spin_until(lambda: (rig.publish_tip(0.0), future.done())[1])
+    handle = future.result()
+    assert handle is not None
+    result = rig.result(handle).result
+    assert result.error_code == Result.INVALID_GOAL
+    assert "hold_timeout_s 0.5 s" in result.error_string
+    assert rig.runner.pending is None

@@ -5,6 +5,12 @@ Subscribes ``trajectory`` (validated whole before a single command goes out), pu
 works) from its own thread against absolute monotonic deadlines, and its timing, refusals
 and faults on ``/diagnostics``. Service ``~/stop`` (std_srvs/Trigger) ramps the pressure down.
 
+After a trajectory's last point the node holds that bend (the same compensator and feedback
+go on) until a new trajectory replaces the hold, ``~/stop`` or a cancel releases it, or
+``hold_timeout_s`` passes; then it ramps down. A new trajectory goes on from the hold when it
+starts at the held bend; any other starts from rest, so the hold is released first (ramped
+down at the slew limit) and the trajectory starts once the command is at zero.
+
 With ``require_pressure_measured`` (default on) or ``require_tip_angle`` (default off: a
 patient has no tip sensor), a run does not start without that stream, and ramps down when it
 has been silent for ``sensor_timeout_s``.
@@ -53,7 +59,7 @@ from catheter_models.contract import (
 )
 from catheter_models.errors import CatheterError, ParameterError
 from catheter_models.plant.config import ParamSpec
-from catheter_models.units import AMBIENT_PRESSURE_PA, deg_to_rad
+from catheter_models.units import AMBIENT_PRESSURE_PA, deg_to_rad, rad_to_deg
 from catheter_ros import diagnostics, messages, qos
 from catheter_ros.loop_node import LifecycleLoopNode
 from catheter_ros.node_main import run_node_as_main
@@ -78,6 +84,13 @@ _WAIT = ParamSpec(
 )
 _STALE = ParamSpec(
     "sensor_timeout_s", 0.1, 0.01, 5.0, "ramp down when a required sensor is silent this long [s]"
+)
+_HOLD = ParamSpec(
+    "hold_timeout_s",
+    60.0,
+    0.0,
+    3600.0,
+    "hold a trajectory's last point this long, then ramp down [s] (0: no hold)",
 )
 _AMB = ParamSpec("ambient_pressure_pa", AMBIENT_PRESSURE_PA, 5.0e4, 1.2e5, "ambient pressure [Pa]")
 
@@ -139,6 +152,7 @@ class CompensatorNode(LifecycleLoopNode):
             )
         }
         self.sensor_timeout_s = declare_float(self, "sensor_timeout_s", _STALE)
+        self.hold_timeout_s = declare_float(self, "hold_timeout_s", _HOLD)
         # Security: with this off nothing on the DDS network can make this node move the
         # catheter (it still holds the line at rest, reports, and answers ~/stop).
         self.accept_trajectories = bool(
@@ -152,7 +166,9 @@ class CompensatorNode(LifecycleLoopNode):
         self.core: ControlCore | None = None
         self.watch = SensorWatch((), self.sensor_timeout_s)
         self.model_rate_hz = 0.0
-        self._pending: tuple[TrajectoryPlan, float] | None = None
+        # The plan waiting to start, when to give up on it, and whether it waits for rest
+        # (a hold it does not go on from is being released).
+        self._pending: tuple[TrajectoryPlan, float, bool] | None = None
         self._angle_measured_rad: float | None = None
         self._lock = threading.Lock()
         self._refusals = 0
@@ -205,7 +221,12 @@ class CompensatorNode(LifecycleLoopNode):
         )
         with self._lock:
             self.core = ControlCore(
-                compensator, self.pmin_pa, self.pmax_pa, self.slew_pa_per_s, feedback
+                compensator,
+                self.pmin_pa,
+                self.pmax_pa,
+                self.slew_pa_per_s,
+                feedback,
+                hold_timeout_s=self.hold_timeout_s,
             )
         if self.accept_trajectories:
             # Subscribed from configure, not activate: a trajectory latched (transient local)
@@ -366,13 +387,33 @@ class CompensatorNode(LifecycleLoopNode):
             return plan
         with self._lock:
             # Start on the control thread once a valve driver listens: commands sent before
-            # DDS has matched it would go nowhere while the plan's clock runs on.
-            self._pending = (plan, time.monotonic() + self.driver_wait_s)
+            # DDS has matched it would go nowhere while the plan's clock runs on. A hold
+            # gets a ramp-down's time more, in case the plan must wait for rest.
+            give_up_s = time.monotonic() + self.driver_wait_s + self.pmax_pa / self.slew_pa_per_s
+            self._pending = (plan, give_up_s, False)
             self._accepted += 1
+            held = None if self.core is None else self.core.hold_angle_rad
+        start = ""
+        if held is not None:
+            start = (
+                f"; it goes on from the hold at {rad_to_deg(held):.2f} deg"
+                if self._goes_on_from(plan, held)
+                else f"; it starts at {rad_to_deg(plan.angle_rad[0]):.2f} deg, not at the held "
+                f"{rad_to_deg(held):.2f} deg, so the hold is released and it starts from rest"
+            )
         self.get_logger().info(
-            f"accepted a {plan.duration_s:.2f} s trajectory ({len(msg.points)} points)"
+            f"accepted a {plan.duration_s:.2f} s trajectory ({len(msg.points)} points){start}"
         )
         return None
+
+    def _goes_on_from(self, plan: TrajectoryPlan, held_rad: float) -> bool:
+        """Whether ``plan`` starts at the held bend.
+
+        At it means no farther off than the plan's own rate limit lets the set-point move in
+        one control tick: going on from there is no faster than the plan itself may be.
+        """
+        step_rad = self.limits.max_rate_rad_s / self.rate_hz
+        return abs(float(plan.angle_rad[0]) - held_rad) <= step_rad + 1e-12
 
     def _on_trajectory(self, msg: JointTrajectory, info: MessageInfo) -> None:
         if self._action is not None and self._action.is_echo(info):
@@ -397,15 +438,17 @@ class CompensatorNode(LifecycleLoopNode):
         now_s = time.monotonic()
         with self._lock:
             core = self.core
-            following = (
-                core.plan if core is not None and core.state == ControlCore.FOLLOWING else None
-            )
+            state = ControlCore.IDLE if core is None else core.state
+            plan = None if core is None else core.plan
+            following = plan if state == ControlCore.FOLLOWING else None
+            holding = plan if state == ControlCore.HOLDING else None
             return RunProgress(
                 pending=None if self._pending is None else self._pending[0],
                 following=following,
-                elapsed_s=0.0 if following is None or core is None else core.elapsed_s(now_s),
+                elapsed_s=0.0 if core is None or plan is None else core.elapsed_s(now_s),
                 ended=tuple(e for e in (self._dropped, core and core.ended) if e),
-                idle=self._pending is None and (core is None or core.state == ControlCore.IDLE),
+                idle=self._pending is None and state == ControlCore.IDLE,
+                holding=holding,
             )
 
     def _on_stop(self, _req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
@@ -418,7 +461,7 @@ class CompensatorNode(LifecycleLoopNode):
         core, loop, sensors = self.core, self.active_loop, self._sensors
         if core is None or loop is None or sensors is None:
             return
-        refusal = fault = ""
+        refusal = fault = released = ""
         for name in sensors.poll():
             self.watch.seen(name, deadline_s)
         if self._angles is not None:
@@ -433,9 +476,22 @@ class CompensatorNode(LifecycleLoopNode):
         with self._lock:
             stale = self.watch.stale(deadline_s)
             if self._pending is not None:
-                plan, give_up_s = self._pending
+                plan, give_up_s, from_rest = self._pending
                 listening = self._pub_cmd.get_subscription_count() > 0
-                if listening and not stale:
+                held = core.hold_angle_rad
+                go_on = held is not None and self._goes_on_from(plan, held)
+                if listening and not stale and held is not None and not from_rest and not go_on:
+                    # It starts elsewhere, as from rest: bring the catheter to rest at the
+                    # slew limit, as ~/stop does, rather than step the set-point.
+                    released = (
+                        f"released the hold at {rad_to_deg(held):.2f} deg: the new "
+                        f"trajectory starts at {rad_to_deg(plan.angle_rad[0]):.2f} deg, "
+                        "so it starts from rest"
+                    )
+                    core.stop(released)
+                    from_rest = True
+                    self._pending = (plan, give_up_s, from_rest)
+                if listening and not stale and (not from_rest or core.state == ControlCore.IDLE):
                     core.start(plan, deadline_s)
                     self._pending = None
                     self._refusal_standing = False
@@ -448,7 +504,21 @@ class CompensatorNode(LifecycleLoopNode):
             if stale and core.state != ControlCore.IDLE and not core.fault_reason:
                 core.fault(stale)
                 fault = stale
+            was = core.state
             out = core.tick(deadline_s, loop.period_s, self._angle_measured_rad)
+            now_state, ended = core.state, core.ended
+        if released:
+            self.get_logger().info(released)
+        if now_state != was and ControlCore.HOLDING in (was, now_state):
+            # Once per hold, not per tick: where it started, or why it ended.
+            if now_state == ControlCore.HOLDING and out is not None:
+                self.get_logger().info(
+                    f"holding {rad_to_deg(out.angle_desired_rad):.2f} deg after the trajectory's "
+                    f"end (released by a new trajectory, ~/stop, a cancel, or after "
+                    f"hold_timeout_s {self.hold_timeout_s:g} s)"
+                )
+            elif now_state == ControlCore.RAMPING_DOWN and ended is not None and ended[1]:
+                self.get_logger().info(f"ramping down: {ended[1]}")
         if refusal:
             self._refuse(refusal)
         if fault:
@@ -485,6 +555,7 @@ class CompensatorNode(LifecycleLoopNode):
                 state, bad_model = core.state, core.nonfinite_from_compensator
                 model_error, fault = core.compensator_error, core.fault_reason
                 model_steps = core.model_steps
+                hold_rad, held_s = core.hold_angle_rad, core.held_s(time.monotonic())
                 fb = core.feedback
                 fb_values = (
                     {}
@@ -508,6 +579,11 @@ class CompensatorNode(LifecycleLoopNode):
                 )
             elif standing:
                 level, message = diagnostics.WARN, f"trajectory refused: {last}"
+            elif hold_rad is not None:
+                message = (
+                    f"holding {rad_to_deg(hold_rad):.2f} deg for {held_s:.1f} s (ramps down "
+                    f"after hold_timeout_s {self.hold_timeout_s:g} s)"
+                )
             setup = {
                 "control_rate_hz": f"{self.rate_hz:g}",
                 "model_rate_hz": f"{self.model_rate_hz:g}" if self.model_rate_hz else "any",
@@ -515,6 +591,9 @@ class CompensatorNode(LifecycleLoopNode):
                 "feedback": self.feedback_kind,
                 **fb_values,
                 "fault": fault,
+                "hold_deg": "" if hold_rad is None else f"{rad_to_deg(hold_rad):.2f}",
+                "held_s": "" if hold_rad is None else f"{held_s:.1f}",
+                "hold_timeout_s": f"{self.hold_timeout_s:g}",
                 "accept_trajectories": str(self.accept_trajectories).lower(),
                 "trajectories_accepted": accepted,
             }

@@ -19,18 +19,25 @@ compensator the same message and get the same checks (:meth:`TrajectoryRunner.su
   The path is checked at the feedback rate; a violation stops the run (the pressure ramps
   down) and aborts with ``PATH_TOLERANCE_VIOLATED``. The goal tolerance must hold at some
   ``tip/angle`` sample within ``goal_time_tolerance`` after the plan's last point (with 0,
-  the first sample after it), else ``GOAL_TOLERANCE_VIOLATED``. Velocity and acceleration
-  tolerances are refused: the catheter's bend rate is not measured. 0 and -1 mean "none".
+  the first sample after it), else ``GOAL_TOLERANCE_VIOLATED``; meanwhile the compensator
+  holds the last point, so a goal whose ``goal_time_tolerance`` is longer than the
+  compensator's ``hold_timeout_s`` is refused. Velocity and acceleration tolerances are
+  refused: the catheter's bend rate is not measured. 0 and -1 mean "none".
+* **Hold.** After the last point the compensator holds it (as ros2_controllers' trajectory
+  controller does), through the goal time and on after the result, until a new trajectory
+  replaces the hold, ``~/stop`` releases it, or its ``hold_timeout_s`` passes.
 * **Result.** ``SUCCESSFUL`` when the plan ran to its end (and met the goal tolerance). A run
-  cut short by the compensator (stale sensor, model failure, ``~/stop``, deactivation) aborts
-  with ``INVALID_GOAL`` and the reason, as ros2_controllers' trajectory controller does for an
-  abort that is not a tolerance.
+  cut short by the compensator (stale sensor, model failure, ``~/stop``, deactivation, and
+  during the goal time also a hold that ended) aborts with ``INVALID_GOAL`` and the reason,
+  as ros2_controllers' trajectory controller does for an abort that is not a tolerance.
 * **Record.** An accepted goal's trajectory is published on ``trajectory`` (transient local,
   as a client of the topic would), so bags and live views show what ran whichever way it
   came; the compensator skips this echo by its publisher (:meth:`TrajectoryActionServer.is_echo`).
 * **Cancel** ramps the pressure down at the slew limit (the compensator's ``~/stop``): a
   catheter left pressurised with no plan would stay bent in the patient. The goal ends
-  ``CANCELED`` once the pressure command has reached zero.
+  ``CANCELED`` once the pressure command has reached zero. This holds during the goal time
+  too (the hold is the goal's own); once the goal has its result it can no longer be
+  cancelled, and ``~/stop`` releases the hold.
 
 The server talks to the compensator through :class:`TrajectoryRunner` only, so it is tested
 with a fake (tests/catheter_control/test_trajectory_action.py); the node gives it
@@ -93,16 +100,22 @@ class RunProgress:
     following: TrajectoryPlan | None
     """The plan being followed now."""
     elapsed_s: float
-    """Plan time of ``following`` [s] (0 when none)."""
+    """Plan time of ``following``, or of ``holding`` (past its end) [s] (0 when none)."""
     ended: tuple[tuple[TrajectoryPlan, str], ...]
-    """Plans that ended lately and why: '' ran to the end, else why they were cut short
-    (including a pending plan dropped before it started)."""
+    """Plans that ended lately and why, oldest first: '' ran to the end (its last point may
+    be held), else why they were cut short (including a pending plan dropped before it
+    started) or why the hold of their last point ended."""
     idle: bool
     """No plan pending or followed and the pressure command is down to zero."""
+    holding: TrajectoryPlan | None = None
+    """The plan whose last point is being held now (it ran to its end)."""
 
 
 class TrajectoryRunner(Protocol):
     """The narrow interface the action server needs from the compensator."""
+
+    hold_timeout_s: float
+    """How long the last point of a plan is held after its end [s]."""
 
     def submit_trajectory(self, msg: JointTrajectory) -> str | None:
         """Queue ``msg`` to run, or refuse it: the reason, or None when accepted."""
@@ -242,8 +255,9 @@ class TrajectoryActionServer:
             if goal.handle is goal_handle:
                 goal.canceling = True
                 progress = self._runner.trajectory_progress()
-                # Only stop the catheter for a run that is this goal's own.
-                if goal.plan is progress.pending or goal.plan is progress.following:
+                # Only stop the catheter for a run (or hold) that is this goal's own.
+                ours = (progress.pending, progress.following, progress.holding)
+                if any(goal.plan is plan for plan in ours):
                     self._runner.stop_trajectory()
         return CancelResponse.ACCEPT
 
@@ -280,8 +294,16 @@ class TrajectoryActionServer:
                     f"{what} for {BEND_JOINT!r} needs the measured bend, and no {TIP_ANGLE.name} "
                     f"sample arrived in the last {_TIP_FRESH_S:g} s"
                 )
-        if _seconds(goal.goal_time_tolerance) < 0.0:
+        goal_time_s = _seconds(goal.goal_time_tolerance)
+        if goal_time_s < 0.0:
             return Result.INVALID_GOAL, "goal_time_tolerance is negative"
+        hold_s = self._runner.hold_timeout_s
+        if goal.goal_tolerance and goal_time_s > hold_s:
+            return Result.INVALID_GOAL, (
+                f"goal_time_tolerance {goal_time_s:g} s is longer than the compensator holds "
+                f"the last point (hold_timeout_s {hold_s:g} s): the goal tolerance would be "
+                "judged on a catheter ramping down"
+            )
         return Result.SUCCESSFUL, ""
 
     async def _execute(self, handle: _Handle) -> FollowJointTrajectory.Result:
@@ -345,16 +367,19 @@ class TrajectoryActionServer:
     def _supervise(
         self, goal: _Goal, progress: RunProgress, now_s: float, measured: float | None
     ) -> None:
-        ended = next((why for plan, why in progress.ended if plan is goal.plan), None)
+        # The newest word on this plan: one that ran to its end may end again (its hold).
+        ended = next((why for plan, why in reversed(progress.ended) if plan is goal.plan), None)
         if goal.canceling:
             if progress.idle or (ended is None and goal.plan is not progress.following):
                 self._finish(goal, "canceled", Result.SUCCESSFUL, "canceled; pressure at zero")
             return
         if ended is not None:
             if ended:
+                # Cut short, or (during the goal time) its hold ended: there is nothing left
+                # to judge the goal tolerance on.
                 self._finish(goal, "abort", Result.INVALID_GOAL, ended)
             else:
-                self._at_end(goal, now_s, measured)
+                self._at_end(goal, progress, now_s, measured)
             return
         if goal.plan is progress.pending:
             return  # not started: nothing to report yet
@@ -383,13 +408,21 @@ class TrajectoryActionServer:
         self._runner.stop_trajectory()
         self._finish(goal, "abort", Result.PATH_TOLERANCE_VIOLATED, why)
 
-    def _at_end(self, goal: _Goal, now_s: float, measured: float | None) -> None:
+    def _at_end(
+        self, goal: _Goal, progress: RunProgress, now_s: float, measured: float | None
+    ) -> None:
         if goal.goal_tol_rad is None:
             self._finish(goal, "succeed", Result.SUCCESSFUL, "")
             return
+        held = goal.plan is progress.holding
         if goal.end_seen_s is None:
-            goal.end_seen_s = now_s
+            # The goal time runs from the plan's end on its own clock, not from when this
+            # timer first noticed it (up to a feedback period later).
+            past_end_s = max(progress.elapsed_s - goal.plan.duration_s, 0.0) if held else 0.0
+            goal.end_seen_s = now_s - past_end_s
         final = float(goal.plan.angle_rad[-1])
+        if held:
+            self._publish_feedback(goal, progress.elapsed_s, final, measured)
         if measured is not None and abs(final - measured) <= goal.goal_tol_rad:
             self._finish(goal, "succeed", Result.SUCCESSFUL, "")
         elif now_s - goal.end_seen_s >= goal.goal_time_tol_s:
