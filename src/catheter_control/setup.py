@@ -44,6 +44,7 @@ setup(
             "excite = catheter_control.excite_node:main",
             "follow_trajectory = catheter_control.follow_trajectory:entry",
             "bringup = catheter_control.bringup:main",
+            "commission = catheter_control.commission:entry",
             "bag_play = catheter_control.bag_play:entry",
             "live_view = catheter_control.live_view:entry",
             "tip_tf = catheter_control.tip_tf:main",

@@ -1,0 +1,646 @@
+"""``commission``: a new catheter from its first recording to closed-loop tracking, in one command.
+
+    ros2 run catheter_control commission -o runs/cath7 --sim                 # simulated rig
+    commission -o runs/cath7 --sim --plant my_lab.rod:make_plant             # your simulator
+    commission -o runs/cath7 --emulated-rig                                   # real drivers
+    commission -o runs/cath7                     # drivers already running on the real rig
+
+The steps, each of which a person can also run by hand (docs/commissioning.md gives the
+commands, and the report shows each one as it was run):
+
+1. ``record_train``, ``record_test``: the lab's excitations, open loop (``excite`` with the
+   recorder on), the training set with its fast steps, and a held-out set; each recording is
+   checked for a rig that responds (a frozen laser, a valve that does not move stop here,
+   before anything is fitted).
+2. ``explain``: the thesis's DRDPI, then the lab's loop (``catheter-lab explain``): which
+   hysteresis law and which physical effects this catheter shows.
+3. ``idrdpi``, ``clstm``: the compensators (the c-LSTM only with ``--clstm-budget-s``).
+4. ``tune``: the PI on the measured bend, from the recorded steps, for margins it reports.
+5. ``follow:<candidate>:<trajectory>``: each compensator with the tuned PI on the four
+   thesis trajectories, on the rig.
+6. ``select``: the best candidate is written, with its gains, as one model directory
+   (``OUT/model``) that ``follow_trajectory --model-dir OUT/model`` and the launch files
+   take as it is; ``OUT/report/index.html`` says what was done and how well it tracks.
+
+A step already done (``OUT/commission.json``) is not redone when the command is run again;
+delete its outputs (or the entry) to redo it. Nothing is written as commissioned unless every
+step before ``select`` succeeded.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import math
+import shutil
+import sys
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from catheter_control.commission_rig import (
+    Candidate,
+    CommissionRig,
+    RigChoice,
+    RigError,
+    check_response,
+)
+from catheter_control.trajectory import (
+    TrajectoryLimits,
+    TrajectoryPlan,
+    preset_knots,
+    with_lead_in,
+)
+from catheter_models.contract import CONTROL_RATE_HZ, DEFAULT_NAMESPACE
+from catheter_models.errors import CatheterError
+from catheter_models.lab.signals import lab_training_specs
+from catheter_models.signals import TEST_TRAJECTORIES
+
+EXIT_REFUSED = 2
+"""The command line or the output directory was refused (the reason is named)."""
+EXIT_GRAPH = 3
+"""The rig did not come up."""
+EXIT_STOPPED = 4
+"""A step failed or the rig does not respond: stopped with the reason, nothing commissioned."""
+EXIT_BELOW_TARGET = 5
+"""Commissioned (the best candidate is written), but it misses the tracking target on at
+least one trajectory; the report names where."""
+EXIT_INTERRUPTED = 130
+"""Ctrl-C: what was done is kept (a rerun goes on from there), nothing is commissioned."""
+
+STATE_FILE = "commission.json"
+MODEL_DIR = "model"
+COMMISSIONED_FILE = "commissioned.json"
+"""Written into the model directory: what the node should run it with (kind, feedback)."""
+TARGET_RMSE_DEG = 0.3
+"""The tracking each thesis trajectory should reach with feedback (issue's target)."""
+LEAD_IN_S = 1.0
+"""As follow_trajectory: a trajectory that does not start straight is approached from rest."""
+
+PROTOCOLS = ("full", "quick")
+FULL_TEST_SIGNALS = (
+    "model_test_up_chirp",
+    "lab_plateaus_999",
+    "lab_steps_998",
+    "model_test_descending_sine",
+)
+"""The held-out recording (about 2 minutes): a chirp, plateaus, fast steps and a sine, the
+lab's held-out signals of other seeds than its training set's."""
+
+
+def protocol_signals(protocol: str) -> dict[str, list[str]]:
+    """The excitations, by recording: the lab's sets (``full``), or a short smoke set.
+
+    ``full`` is the lab's training set (the thesis's eight sines, two plateau signals and one
+    with fast steps, about 4.5 minutes) and its held-out set (about 2 minutes). ``quick``
+    (about a minute in all) is for tests and trying the tool: enough to fit and tune, not
+    enough for a model to trust.
+    """
+    if protocol == "quick":
+        return {
+            "train": ["train_zero_f0.4", "train_nonzero_f0.6", "lab_steps_102"],
+            "test": ["lab_steps_998"],
+        }
+    return {"train": [s.name for s in lab_training_specs()], "test": list(FULL_TEST_SIGNALS)}
+
+
+class StepError(CatheterError):
+    """A step failed; the message says which and why."""
+
+
+@dataclass
+class StepRecord:
+    """One step's entry in commission.json."""
+
+    done: bool = False
+    seconds: float = 0.0
+    commands: list[str] = field(default_factory=list)
+    """The by-hand equivalent, as run."""
+    output: str = ""
+    """What the step printed (for the report)."""
+    facts: dict[str, Any] = field(default_factory=dict)
+
+
+class State:
+    """commission.json: the rig it was made on and every step's record; saved after each step."""
+
+    def __init__(self, out_dir: Path, rig: RigChoice, protocol: str) -> None:
+        self.path = out_dir / STATE_FILE
+        self.steps: dict[str, StepRecord] = {}
+        self.rig = rig.to_dict()
+        self.protocol = protocol
+        if self.path.exists():
+            data = json.loads(self.path.read_text())
+            if data.get("rig") != self.rig or data.get("protocol") != protocol:
+                raise CatheterError(
+                    f"{out_dir} was commissioned on {data.get('rig')} with the "
+                    f"{data.get('protocol')!r} protocol, not {self.rig} / {protocol!r}; its "
+                    "recordings belong to that rig: choose a new directory"
+                )
+            self.steps = {k: StepRecord(**v) for k, v in data.get("steps", {}).items()}
+
+    def save(self) -> None:
+        """Write it atomically, so a kill mid-write leaves the previous state."""
+        data = {
+            "rig": self.rig,
+            "protocol": self.protocol,
+            "steps": {k: vars(v) for k, v in self.steps.items()},
+        }
+        tmp = self.path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(data, indent=2, default=float) + "\n")
+        tmp.replace(self.path)
+
+    def done(self, name: str) -> bool:
+        """Whether ``name`` finished (its outputs are checked by the caller)."""
+        rec = self.steps.get(name)
+        return rec is not None and rec.done
+
+
+class _Tee(io.TextIOBase):
+    """Prints through to the terminal and keeps a copy for the report."""
+
+    def __init__(self, out: Any) -> None:
+        self.out = out
+        self.kept = io.StringIO()
+
+    def write(self, text: str) -> int:
+        self.out.write(text)
+        self.kept.write(text)
+        return len(text)
+
+    def flush(self) -> None:
+        self.out.flush()
+
+
+@contextlib.contextmanager
+def _captured() -> Iterator[_Tee]:
+    tee = _Tee(sys.stdout)
+    with contextlib.redirect_stdout(tee):  # type: ignore[type-var]
+        yield tee
+
+
+def run_lab(argv: list[str], record: StepRecord) -> None:
+    """Run a ``catheter-lab`` verb in this process, as a person would type it.
+
+    Raises:
+        StepError: it refused or failed (its own message is above).
+    """
+    from catheter_models import cli
+
+    line = "catheter-lab " + " ".join(argv)
+    record.commands.append(line)
+    print(f"$ {line}", flush=True)
+    with _captured() as tee:
+        try:
+            cli.main(argv)
+            code: object = 0
+        except SystemExit as exc:
+            code = exc.code
+    record.output += tee.kept.getvalue()
+    if code not in (0, None):
+        raise StepError(f"`{line}` failed (exit {code}); its reason is printed above")
+
+
+@dataclass
+class Commission:
+    """One commissioning: its directory, its rig, its settings, and the state of its steps."""
+
+    out_dir: Path
+    choice: RigChoice
+    protocol: str
+    clstm_budget_s: float
+    explain_steps: int
+    workers: int | None
+    control_rate_hz: float
+    show_progress: bool
+    trajectories: tuple[str, ...] = TEST_TRAJECTORIES
+    state: State = field(init=False)
+    rig: CommissionRig = field(init=False)
+    _rig_up: bool = field(default=False, init=False)
+
+    def __post_init__(self) -> None:
+        self.out_dir.mkdir(parents=True, exist_ok=True)
+        self.state = State(self.out_dir, self.choice, self.protocol)
+        self.rig = CommissionRig(self.choice, self.out_dir / "logs")
+
+    # -- paths ----------------------------------------------------------------------------
+    def bag(self, name: str) -> Path:
+        """A recording's bag directory."""
+        return self.out_dir / "bags" / name
+
+    @property
+    def tune_dir(self) -> Path:
+        """Where ``catheter-lab tune`` writes feedback.json and its report."""
+        return self.out_dir / "tune"
+
+    def candidate_dir(self, kind: str) -> Path:
+        """A compensator's model directory."""
+        return self.out_dir / "candidates" / kind
+
+    def candidates(self) -> list[Candidate]:
+        """The compensators fitted so far, each with the tuned PI."""
+        kinds = ["idrdpi"] + (["clstm"] if self.clstm_budget_s > 0 else [])
+        return [
+            Candidate(f"{k}+pi", k, self.candidate_dir(k), "pi", self.tune_dir / "feedback.json")
+            for k in kinds
+        ]
+
+    # -- running steps --------------------------------------------------------------------
+    def step(
+        self, name: str, title: str, run: Callable[[StepRecord], None], *outputs: Path
+    ) -> None:
+        """Run ``run`` as step ``name`` unless it is done and its outputs exist."""
+        if self.state.done(name) and all(p.exists() for p in outputs):
+            print(f"commission: {title}: done already ({self.state.steps[name].seconds:.0f} s)")
+            return
+        print(f"\ncommission: {title}", flush=True)
+        record = StepRecord()
+        start = time.monotonic()
+        run(record)
+        record.seconds = time.monotonic() - start
+        record.done = True
+        self.state.steps[name] = record
+        self.state.save()
+        print(f"commission: {title}: done in {record.seconds:.0f} s", flush=True)
+
+    def ensure_rig(self) -> None:
+        """Bring the rig up the first time a step needs it."""
+        if not self._rig_up:
+            print(f"commission: rig: {self.choice.describe()} (logs in {self.rig.log_dir})")
+            self.rig.start()
+            self._rig_up = True
+
+    def close(self) -> None:
+        """Stop what was started."""
+        if self._rig_up:
+            self.rig.stop()
+            self._rig_up = False
+
+    def run(self) -> int:
+        """Every step in order; the exit code (raises on a failed step)."""
+        signals = protocol_signals(self.protocol)
+        for part in ("train", "test"):
+            self.step(
+                f"record_{part}",
+                f"record the {part} excitation ({', '.join(signals[part])})",
+                lambda rec, part=part: self._record(part, signals[part], rec),
+                self.bag(part),
+            )
+        train, test = str(self.bag("train")), str(self.bag("test"))
+        forward = self.out_dir / "forward"
+        self.step("explain", "explain the catheter (lab)", self._explain, forward / "explain")
+        self.step(
+            "idrdpi",
+            "fit the inverse DRDPI compensator",
+            lambda rec: run_lab(
+                [
+                    "train",
+                    "idrdpi",
+                    "--train",
+                    train,
+                    "--validate",
+                    test,
+                    "--quiet",
+                    "-o",
+                    str(self.candidate_dir("idrdpi")),
+                ],
+                rec,
+            ),
+            self.candidate_dir("idrdpi"),
+        )
+        if self.clstm_budget_s > 0:
+            self.step(
+                "clstm",
+                f"fit the c-LSTM ({self.clstm_budget_s:g} s budget)",
+                self._clstm,
+                self.candidate_dir("clstm"),
+            )
+        self.step(
+            "tune",
+            "tune the PI on the measured bend",
+            lambda rec: run_lab(
+                [
+                    "tune",
+                    train,
+                    "-o",
+                    str(self.tune_dir),
+                    "--report",
+                    str(self.tune_dir / "report"),
+                ],
+                rec,
+            ),
+            self.tune_dir / "feedback.json",
+        )
+        for candidate in self.candidates():
+            for trajectory in self.trajectories:
+                run_dir = self.out_dir / "runs" / candidate.name / trajectory
+                self.step(
+                    f"follow:{candidate.name}:{trajectory}",
+                    f"follow {trajectory} with {candidate.name}",
+                    lambda rec, c=candidate, t=trajectory, d=run_dir: self._follow(c, t, d, rec),
+                    run_dir / "report.json",
+                )
+        return self._select()
+
+    # -- the steps ------------------------------------------------------------------------
+    def _record(self, part: str, signals: list[str], record: StepRecord) -> None:
+        self.ensure_rig()
+        bag = self.bag(part)
+        if bag.exists():
+            # A bag from an interrupted recording is incomplete: record it again.
+            shutil.rmtree(bag)
+        bag.parent.mkdir(parents=True, exist_ok=True)
+        ns = self.choice.namespace
+        record.commands.append(
+            f"excite --ros-args -r __ns:={ns} -p signal:={','.join(signals)} "
+            f"-p min_subscribers:=2   (beside: recorder --ros-args -r __ns:={ns} "
+            f"-p bag_path:={bag})"
+        )
+        self.rig.record(
+            signals,
+            bag,
+            {"source": "commission", "signal": ",".join(signals), "rig": self.choice.describe()},
+            show_progress=self.show_progress,
+        )
+        check = check_response(bag)
+        record.facts["check"] = check.to_dict()
+        problem = check.problem()
+        if problem:
+            raise RigError(f"the rig does not respond: {problem}")
+        print(
+            f"commission: {bag.name}: {check.duration_s:.0f} s, command spans "
+            f"{check.command_span_bar:.2f} bar, measured {check.measured_span_bar:.2f} bar, "
+            f"bend {check.bend_span_deg:.1f} deg"
+        )
+
+    def _explain(self, record: StepRecord) -> None:
+        train, test = str(self.bag("train")), str(self.bag("test"))
+        forward = self.out_dir / "forward"
+        for stale in (forward / "drdpi", forward / "explain"):
+            if stale.exists():  # left by an interrupted run: the verbs want new directories
+                shutil.rmtree(stale)
+        run_lab(
+            ["train", "drdpi", "--train", train, "--quiet", "-o", str(forward / "drdpi")], record
+        )
+        argv = [
+            "explain",
+            str(forward / "drdpi"),
+            "--train",
+            train,
+            "--test",
+            test,
+            "-o",
+            str(forward / "explain"),
+            "--max-steps",
+            str(self.explain_steps),
+        ]
+        if self.workers is not None:
+            argv += ["--workers", str(self.workers)]
+        run_lab(argv, record)
+        explanation = json.loads((forward / "explain" / "explanation.json").read_text())
+        record.facts["explanation"] = explanation
+
+    def _clstm(self, record: StepRecord) -> None:
+        try:
+            import torch  # noqa: F401
+        except ImportError:
+            raise StepError(
+                "the c-LSTM needs torch (the training extra: `make setup`, or "
+                "`pip install -r requirements-train.txt`); run without --clstm-budget-s"
+            ) from None
+        out = self.candidate_dir("clstm")
+        if out.exists():
+            shutil.rmtree(out)
+        run_lab(
+            [
+                "train",
+                "clstm",
+                "--train",
+                str(self.bag("train")),
+                "--validate",
+                str(self.bag("test")),
+                "--set",
+                f"time_budget_s={self.clstm_budget_s:g}",
+                # One recording of training data: hold out its tail, not a whole recording.
+                "--set",
+                'validation_split="time"',
+                "--quiet",
+                "-o",
+                str(out),
+            ],
+            record,
+        )
+
+    def _follow(
+        self, candidate: Candidate, trajectory: str, run_dir: Path, record: StepRecord
+    ) -> None:
+        from catheter_control import tracking_report as report
+
+        self.ensure_rig()
+        t_s, angle_rad = preset_knots(trajectory)
+        t_s, angle_rad, lead_s = with_lead_in(t_s, angle_rad, LEAD_IN_S, LEAD_IN_S)
+        plan = TrajectoryPlan.from_knots(
+            t_s, angle_rad, TrajectoryLimits(), self.control_rate_hz, trajectory
+        )
+        record.commands.append(
+            f"follow_trajectory --preset {trajectory} --model-dir {candidate.model_dir} "
+            f"--compensator {candidate.compensator} --feedback pi --feedback-gains "
+            f"{candidate.feedback_gains}"
+        )
+        run = self.rig.follow(
+            plan,
+            candidate,
+            lead_s,
+            control_rate_hz=self.control_rate_hz,
+            show_progress=self.show_progress,
+        )
+        result = report.score_record(run, plan.duration_s, lead_s)
+        print(result.text(f"{trajectory}, {candidate.name}"))
+        run_dir.mkdir(parents=True, exist_ok=True)
+        report.save_plot(result, run_dir / "tracking.png", f"{trajectory}: {candidate.name}")
+        summary = report.RunSummary.of(run)
+        losses = report.sample_losses(run, None)
+        facts = report.run_facts(
+            run, summary, losses, trajectory=trajectory, bag_path=None, lead_s=lead_s
+        )
+        report.save_json(result, run_dir / "report.json", facts)
+        record.facts.update(
+            rmse_deg=math.degrees(result.overall.rmse),
+            mae_deg=math.degrees(result.overall.mae),
+            stopped=run.stopped,
+        )
+        if run.stopped:
+            raise StepError(f"{candidate.name} on {trajectory} stopped part-way: {run.stopped}")
+
+    def scores(self) -> dict[str, dict[str, float]]:
+        """RMSE [deg] by candidate and trajectory, of the runs done."""
+        out: dict[str, dict[str, float]] = {}
+        for candidate in self.candidates():
+            for trajectory in self.trajectories:
+                rec = self.state.steps.get(f"follow:{candidate.name}:{trajectory}")
+                if rec is not None and rec.done:
+                    out.setdefault(candidate.name, {})[trajectory] = float(rec.facts["rmse_deg"])
+        return out
+
+    def _select(self) -> int:
+        scores = self.scores()
+        complete = {c: s for c, s in scores.items() if len(s) == len(self.trajectories)}
+        if not complete:
+            raise StepError("no candidate completed every trajectory")
+        # The worst trajectory decides: a compensator is only as good as where it fails.
+        best = min(complete, key=lambda c: (max(complete[c].values()), sum(complete[c].values())))
+        candidate = next(c for c in self.candidates() if c.name == best)
+        model = self.out_dir / MODEL_DIR
+        if model.exists():
+            shutil.rmtree(model)
+        shutil.copytree(candidate.model_dir, model)
+        shutil.copy2(candidate.feedback_gains, model / "feedback.json")
+        misses = {t: r for t, r in complete[best].items() if r > TARGET_RMSE_DEG}
+        commissioned = {
+            "compensator": candidate.compensator,
+            "feedback": candidate.feedback,
+            "rig": self.choice.to_dict(),
+            "rmse_deg": complete[best],
+            "target_rmse_deg": TARGET_RMSE_DEG,
+            "misses": misses,
+            "candidates": scores,
+        }
+        (model / COMMISSIONED_FILE).write_text(json.dumps(commissioned, indent=2) + "\n")
+        self.state.steps["select"] = StepRecord(done=True, facts=commissioned)
+        self.state.save()
+        print(
+            f"\ncommission: chosen {best}: RMSE "
+            + ", ".join(f"{t} {r:.3f} deg" for t, r in complete[best].items())
+        )
+        print(f"commission: model directory: {model}")
+        print(f"commission: use it: follow_trajectory --model-dir {model} ...")
+        if misses:
+            print(
+                f"commission: above the {TARGET_RMSE_DEG} deg target on "
+                + ", ".join(f"{t} ({r:.3f} deg)" for t, r in misses.items()),
+                file=sys.stderr,
+            )
+            return EXIT_BELOW_TARGET
+        return 0
+
+
+def _parse(argv: list[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(
+        prog="commission",
+        description="Commission a catheter: record, explain, fit, tune, verify, write one "
+        "model directory and a report (docs/commissioning.md).",
+    )
+    parser.add_argument(
+        "-o",
+        "--output",
+        type=Path,
+        required=True,
+        help="commissioning directory (a rerun goes on where it stopped)",
+    )
+    rig = parser.add_mutually_exclusive_group()
+    rig.add_argument("--sim", action="store_true", help="start the simulated rig")
+    rig.add_argument(
+        "--emulated-rig",
+        action="store_true",
+        help="start emulated devices and the real valve_driver and laser_angle",
+    )
+    parser.add_argument(
+        "--plant",
+        default="",
+        metavar="MODULE:FACTORY",
+        help="with --sim/--emulated-rig: your plant (docs/simulated_rig.md)",
+    )
+    parser.add_argument("--namespace", default=DEFAULT_NAMESPACE)
+    parser.add_argument(
+        "--protocol",
+        choices=PROTOCOLS,
+        default="full",
+        help="the excitations: the lab's sets (full, ~7 min) or a short smoke set",
+    )
+    parser.add_argument(
+        "--clstm-budget-s",
+        type=float,
+        default=0.0,
+        help="also fit a c-LSTM within this wall time [s] (needs torch; 0: no)",
+    )
+    parser.add_argument(
+        "--explain-steps", type=int, default=3, help="changes the lab's loop may make at most"
+    )
+    parser.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="processes for the lab's refits (default: one per core)",
+    )
+    parser.add_argument(
+        "--trajectories",
+        default=",".join(TEST_TRAJECTORIES),
+        help="comma-separated thesis trajectories to verify on",
+    )
+    parser.add_argument("--control-rate-hz", type=float, default=CONTROL_RATE_HZ)
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+    args = parser.parse_args(argv)
+    if args.plant and not (args.sim or args.emulated_rig):
+        parser.error("--plant needs --sim or --emulated-rig (a real rig has its own plant)")
+    if args.clstm_budget_s < 0 or not math.isfinite(args.clstm_budget_s):
+        parser.error(f"--clstm-budget-s must be >= 0, not {args.clstm_budget_s}")
+    if args.explain_steps < 0:
+        parser.error(f"--explain-steps must be >= 0, not {args.explain_steps}")
+    unknown = set(args.trajectories.split(",")) - set(TEST_TRAJECTORIES)
+    if unknown:
+        parser.error(f"unknown trajectories {sorted(unknown)}; the thesis's: {TEST_TRAJECTORIES}")
+    return args
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point; returns the exit code."""
+    from catheter_control.commission_report import write_report
+
+    args = _parse(argv)
+    mode = "sim" if args.sim else "emulated" if args.emulated_rig else "running"
+    try:
+        job = Commission(
+            out_dir=args.output,
+            choice=RigChoice(mode, args.plant, args.namespace),
+            protocol=args.protocol,
+            clstm_budget_s=args.clstm_budget_s,
+            explain_steps=args.explain_steps,
+            workers=args.workers,
+            control_rate_hz=args.control_rate_hz,
+            show_progress=not args.no_progress,
+            trajectories=tuple(args.trajectories.split(",")),
+        )
+    except (CatheterError, OSError, ValueError) as exc:
+        print(f"commission: {exc}", file=sys.stderr)
+        return EXIT_REFUSED
+    failure = ""
+    try:
+        code = job.run()
+    except KeyboardInterrupt:
+        failure, code = "interrupted (Ctrl-C); rerun the same command to go on", EXIT_INTERRUPTED
+    except RigError as exc:
+        failure = str(exc)
+        code = EXIT_GRAPH if not job._rig_up else EXIT_STOPPED
+    except CatheterError as exc:
+        failure, code = str(exc), EXIT_STOPPED
+    finally:
+        job.close()
+    if failure:
+        print(f"commission: stopped: {failure}", file=sys.stderr)
+        print("commission: nothing was commissioned", file=sys.stderr)
+    report = write_report(job, failure)
+    print(f"commission: report: {report}")
+    return code
+
+
+def entry() -> None:
+    """Console-script wrapper that turns the return code into the exit status."""
+    sys.exit(main())
+
+
+if __name__ == "__main__":
+    entry()

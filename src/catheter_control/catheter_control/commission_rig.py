@@ -1,0 +1,422 @@
+"""The rig ``commission`` drives: one it starts (``--sim``, ``--emulated-rig``) or one running.
+
+Commissioning needs the hardware side of the graph (the valve and the laser, or what stands
+in for them) to stay up through every step, while the parts on top come and go: a recorder
+and ``excite`` for each excitation, then a compensator per candidate for the trajectories.
+So the hardware is one :class:`~catheter_control.bringup.ProcessGraph` (or the drivers a
+person started on the rig), and each step starts and stops its own nodes on it, exactly the
+processes a person would start by hand (docs/commissioning.md lists them).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from catheter_control.bringup import (
+    EmulatedDevices,
+    NodeSpec,
+    ProcessGraph,
+    driver_specs,
+    sim_graph_specs,
+)
+from catheter_control.progress_bar import ProgressBar
+from catheter_control.tracking_report import RunRecord
+from catheter_control.trajectory import TrajectoryPlan
+from catheter_models.bag import load_bag
+from catheter_models.contract import CONTROL_RATE_HZ, SENSOR_RATE_HZ
+from catheter_models.errors import CatheterError
+from catheter_models.geometry import Calibration
+from catheter_models.lab.signals import lab_spec
+from catheter_models.plant import PlantConfig
+from catheter_models.signals import get_preset
+
+RIG_MODES = ("sim", "emulated", "running")
+
+_EXCITE_LEAD_IN_S = 0.5
+_EXCITE_TAIL_S = 1.0
+_EXCITE_START_WAIT_S = 30.0
+"""How long ``excite`` waits for the rig and the recorder to subscribe (discovery on a busy
+host can take seconds; a rig that never listens is named after this)."""
+_SETTLE_S = 2.0
+"""Rest between runs: the muscle empties and the tip comes back before the next one starts."""
+
+# What a recording must show for the rig to count as responding. A valve that moves follows
+# its set-point within its own accuracy (the Keller transmitter reads 0.1 % of its span);
+# a catheter that bends moves its tip by tens of degrees over 3 bar. These bounds sit far
+# below both and far above noise (0.05 deg, a few hundred Pa), so a working rig never trips
+# them and a frozen one always does.
+MIN_COMMAND_SPAN_PA = 0.5e5
+"""A recording whose command spans less than this says nothing about the rig."""
+MIN_PRESSURE_FOLLOW = 0.2
+"""The measured pressure must span at least this share of the commanded span."""
+MIN_BEND_SPAN_DEG = 1.0
+"""The bend must span at least this much when the pressure spans a bar or more."""
+
+
+class RigError(CatheterError):
+    """The rig did not come up, or does not respond (frozen laser, valve that does not move)."""
+
+
+@dataclass(frozen=True)
+class RigChoice:
+    """Which rig commission drives.
+
+    Attributes:
+        mode: ``sim`` (commission starts ``sim_hardware``), ``emulated`` (emulated devices
+            and the real drivers), or ``running`` (drivers already up in ``namespace``).
+        plant: ``module:factory`` of the plant behind ``sim``/``emulated`` ('' = ours).
+        namespace: The graph's namespace.
+    """
+
+    mode: str
+    plant: str
+    namespace: str
+
+    def describe(self) -> str:
+        """One line for the terminal and the report."""
+        plant = self.plant or "the shipped simulated rig"
+        if self.mode == "sim":
+            return f"simulated rig (sim_hardware), plant: {plant}"
+        if self.mode == "emulated":
+            return f"emulated devices and the real drivers, plant: {plant}"
+        return f"the drivers already running in {self.namespace}"
+
+    def to_dict(self) -> dict[str, str]:
+        """For commission.json: a directory is commissioned on one rig."""
+        return {"mode": self.mode, "plant": self.plant, "namespace": self.namespace}
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A compensator with the tuned feedback, as the node will host it.
+
+    Attributes:
+        name: The candidate's label (``idrdpi+pi``).
+        compensator: The node's ``compensator`` parameter.
+        model_dir: Its model directory.
+        feedback: ``pi`` or ``none``.
+        feedback_gains: The ``feedback.json`` that ``catheter-lab tune`` wrote.
+    """
+
+    name: str
+    compensator: str
+    model_dir: Path
+    feedback: str
+    feedback_gains: Path
+
+    def params(self, control_rate_hz: float) -> dict[str, object]:
+        """The compensator node's parameters."""
+        return {
+            "control_rate_hz": control_rate_hz,
+            "compensator": self.compensator,
+            "model_dir": str(self.model_dir),
+            "feedback": self.feedback,
+            "feedback_gains": str(self.feedback_gains),
+            # The rig has a laser: stop if it goes quiet, as follow_trajectory --sim does.
+            "require_tip_angle": True,
+        }
+
+
+def signal_duration_s(signals: Sequence[str], rate_hz: float = CONTROL_RATE_HZ) -> float:
+    """About how long ``excite`` takes to send ``signals`` [s]: for the progress bar only.
+
+    Lead-in, each signal and its tail; the ramp down after a signal that ends above zero
+    (at most a second or so) is left out.
+    """
+    total = _EXCITE_LEAD_IN_S
+    for name in signals:
+        spec = lab_spec(name) or get_preset(name)
+        total += spec.generate(rate_hz).values_si.size / rate_hz + _EXCITE_TAIL_S
+    return total
+
+
+class CommissionRig:
+    """The hardware side of the graph, up for the whole commissioning.
+
+    Args:
+        choice: Which rig.
+        log_dir: Where every started node logs.
+        timeout_s: How long the graph may take to come up.
+    """
+
+    def __init__(self, choice: RigChoice, log_dir: Path, timeout_s: float = 60.0) -> None:
+        self.choice = choice
+        self.log_dir = log_dir
+        self.timeout_s = timeout_s
+        self._graph: ProcessGraph | None = None
+        self._devices: EmulatedDevices | None = None
+
+    # -- the hardware ---------------------------------------------------------------------
+    def start(self) -> None:
+        """Bring the hardware up (or check the running drivers).
+
+        Raises:
+            RigError: a node or the emulated devices failed to start, or (``running``) no
+                driver publishes in the namespace, or a compensator already runs there.
+        """
+        choice = self.choice
+        if choice.mode in ("sim", "emulated"):
+            # A local rig must never reach a real one on the network.
+            os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+        if choice.mode == "running":
+            self._check_running()
+            return
+        sim_params: dict[str, object] = {"plant": choice.plant} if choice.plant else {}
+        specs = sim_graph_specs(None, None, sim_params, with_compensator=False)
+        if choice.mode == "emulated":
+            self._devices = EmulatedDevices(
+                extra_args=["--plant", choice.plant] if choice.plant else ()
+            )
+            try:
+                ports = self._devices.start()
+            except RuntimeError as exc:
+                raise RigError(str(exc)) from exc
+            # Zeroed at the simulated straight-tip distance, as ~/zero would measure it.
+            calibration = self.log_dir / "laser_calibration.json"
+            self.log_dir.mkdir(parents=True, exist_ok=True)
+            straight_m = PlantConfig.thesis_rig().rig["straight_distance_m"]
+            Calibration(straight_m, 0.0, 0, "emulated rig").save(calibration)
+            specs = driver_specs(ports, calibration)
+        graph = ProcessGraph(specs, choice.namespace, log_dir=self.log_dir)
+        try:
+            graph.start()
+        except CatheterError as exc:
+            self.stop()
+            raise RigError(f"the rig did not come up: {exc}") from exc
+        self._graph = graph
+
+    def stop(self) -> None:
+        """Stop what this rig started (nothing for a running one)."""
+        if self._graph is not None:
+            self._graph.stop()
+            self._graph = None
+        if self._devices is not None:
+            self._devices.stop()
+            self._devices = None
+
+    def _check_running(self) -> None:
+        """Drivers publish in the namespace and no compensator commands the valve."""
+        import rclpy
+        from rclpy.node import Node
+
+        ns = self.choice.namespace.rstrip("/")
+        deadline = time.monotonic() + min(self.timeout_s, 10.0)
+        with rclpy.init(args=["commission"]):
+            node = Node("commission_probe")
+            topics: set[str] = set()
+            nodes: set[str] = set()
+            # Discovery is gradual: keep looking until both sensor streams show up.
+            while time.monotonic() < deadline:
+                rclpy.spin_once(node, timeout_sec=0.2)
+                topics = {name for name, _ in node.get_topic_names_and_types()}
+                nodes = {
+                    f"{n_ns.rstrip('/')}/{name}"
+                    for name, n_ns in node.get_node_names_and_namespaces()
+                }
+                if {f"{ns}/pressure/measured", f"{ns}/tip/angle"} <= topics:
+                    break
+            node.destroy_node()
+        missing = [t for t in ("pressure/measured", "tip/angle") if f"{ns}/{t}" not in topics]
+        if missing:
+            raise RigError(
+                f"no {', '.join(f'{ns}/{t}' for t in missing)} in this ROS domain "
+                f"(ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')}): start the rig's "
+                "drivers first (docs/rig.md), or use --sim / --emulated-rig"
+            )
+        if f"{ns}/compensator" in nodes:
+            raise RigError(
+                f"{ns}/compensator is running: it commands the valve every tick and would fight "
+                "the excitations; start the drivers without it (commission starts its own)"
+            )
+
+    # -- steps on top of it ---------------------------------------------------------------
+    def record(
+        self,
+        signals: Sequence[str],
+        bag_path: Path,
+        custom_data: Mapping[str, str],
+        *,
+        show_progress: bool,
+    ) -> None:
+        """Record ``excite`` sending ``signals`` open loop into a new bag at ``bag_path``.
+
+        Raises:
+            RigError: the recorder or ``excite`` failed (the log's last lines say why), or
+                the rig never listened.
+        """
+        recorder = NodeSpec(
+            "recorder",
+            "catheter_control.recorder_node",
+            {"bag_path": str(bag_path), "custom_data": json.dumps(dict(custom_data))},
+        )
+        graph = ProcessGraph([recorder], self.choice.namespace, log_dir=self.log_dir)
+        graph.start()
+        excite_log = self.log_dir / f"excite-{bag_path.name}.log"
+        argv = [
+            sys.executable,
+            "-m",
+            "catheter_control.excite_node",
+            "--ros-args",
+            "-r",
+            f"__ns:={self.choice.namespace}",
+            "-p",
+            f"signal:={','.join(signals)}",
+            # The rig (or valve driver) and the recorder: a recording needs both listening.
+            "-p",
+            "min_subscribers:=2",
+            "-p",
+            f"wait_for_subscriber_s:={_EXCITE_START_WAIT_S}",
+            "-p",
+            f"lead_in_s:={_EXCITE_LEAD_IN_S}",
+            "-p",
+            f"tail_s:={_EXCITE_TAIL_S}",
+        ]
+        duration_s = signal_duration_s(signals)
+        bar = ProgressBar(duration_s, show_progress)
+        try:
+            with excite_log.open("wb") as log:
+                proc = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT)
+                start = time.monotonic()
+                limit_s = duration_s + _EXCITE_START_WAIT_S + 30.0
+                try:
+                    while proc.poll() is None:
+                        time.sleep(0.2)
+                        bar.show(time.monotonic() - start)
+                        self._check_alive(graph)
+                        if time.monotonic() - start > limit_s:
+                            raise RigError(
+                                f"excite did not finish {signals} within {limit_s:.0f} s"
+                            )
+                finally:
+                    if proc.poll() is None:
+                        proc.terminate()
+                        proc.wait(10.0)
+        finally:
+            bar.close()
+            graph.stop()
+        if proc.returncode != 0:
+            tail = "\n".join(excite_log.read_text(errors="replace").splitlines()[-5:])
+            raise RigError(f"excite ended with code {proc.returncode}:\n{tail}")
+
+    def _check_alive(self, extra: ProcessGraph | None = None) -> None:
+        for graph in (self._graph, extra):
+            if graph is not None and (dead := graph.failed()):
+                name = next(iter(dead))
+                raise RigError(
+                    f"{name} exited (code {dead[name]}) during commissioning; its log ends:\n"
+                    f"{graph.log_tail(name, 8)}"
+                )
+
+    def follow(
+        self,
+        plan: TrajectoryPlan,
+        candidate: Candidate,
+        lead_s: float,
+        *,
+        control_rate_hz: float,
+        show_progress: bool,
+    ) -> RunRecord:
+        """Start the candidate's compensator, follow ``plan`` as follow_trajectory does, stop it.
+
+        Raises:
+            RigError: the compensator did not come up, or the rig died.
+            GoalRefusedError, GraphNotReadyError: as ``follow_trajectory``'s run.
+        """
+        from catheter_control.trajectory_client import follow
+
+        self._check_alive()
+        spec = NodeSpec(
+            "compensator",
+            "catheter_control.compensator_node",
+            candidate.params(control_rate_hz),
+        )
+        graph = ProcessGraph([spec], self.choice.namespace, log_dir=self.log_dir)
+        try:
+            graph.start()
+        except CatheterError as exc:
+            raise RigError(f"{candidate.name}: the compensator did not come up: {exc}") from exc
+        try:
+            return follow(
+                plan,
+                namespace=self.choice.namespace,
+                ros_args=[],
+                timeout_s=self.timeout_s,
+                graph=graph,
+                wait_for_recorder=False,
+                show_progress=show_progress,
+                lead_s=lead_s,
+            )
+        finally:
+            graph.stop()  # deactivates the compensator first: it ramps the pressure down
+            time.sleep(_SETTLE_S)
+
+
+@dataclass(frozen=True)
+class ResponseCheck:
+    """What one recording says about the rig: spans of command, measurement and bend."""
+
+    bag: str
+    command_span_bar: float
+    measured_span_bar: float
+    bend_span_deg: float
+    duration_s: float
+    samples: int
+
+    def problem(self) -> str:
+        """'' for a rig that responds, else what does not."""
+        if self.command_span_bar * 1e5 < MIN_COMMAND_SPAN_PA:
+            return (
+                f"{self.bag}: the command spans only {self.command_span_bar:.2f} bar; the "
+                "excitation did not reach the valve"
+            )
+        if self.measured_span_bar < MIN_PRESSURE_FOLLOW * self.command_span_bar:
+            return (
+                f"{self.bag}: the valve does not move: pressure/measured spans "
+                f"{self.measured_span_bar:.3f} bar while pressure/command spans "
+                f"{self.command_span_bar:.2f} bar (valve, supply, or transmitter?)"
+            )
+        if self.command_span_bar >= 1.0 and self.bend_span_deg < MIN_BEND_SPAN_DEG:
+            return (
+                f"{self.bag}: the tip does not move: tip/angle spans {self.bend_span_deg:.2f} "
+                f"deg while the pressure spans {self.measured_span_bar:.2f} bar (a frozen "
+                "laser, a laser off its marker, or a catheter that does not bend)"
+            )
+        return ""
+
+    def to_dict(self) -> dict[str, object]:
+        """For commission.json and the report."""
+        return {
+            "bag": self.bag,
+            "command_span_bar": self.command_span_bar,
+            "measured_span_bar": self.measured_span_bar,
+            "bend_span_deg": self.bend_span_deg,
+            "duration_s": self.duration_s,
+            "samples": self.samples,
+        }
+
+
+def check_response(bag_path: Path) -> ResponseCheck:
+    """Spans (5th to 95th percentile, so a spike or a glitch does not count as motion)."""
+    series = load_bag(bag_path).aligned(SENSOR_RATE_HZ)
+
+    def span(values: np.ndarray) -> float:
+        low, high = np.percentile(values, [5.0, 95.0])
+        return float(high - low)
+
+    return ResponseCheck(
+        bag=bag_path.name,
+        command_span_bar=span(np.asarray(series.pressure_command_pa)) / 1e5,
+        measured_span_bar=span(np.asarray(series.pressure_measured_pa)) / 1e5,
+        bend_span_deg=float(np.degrees(span(np.asarray(series.angle_rad)))),
+        duration_s=float(series.t_s[-1] - series.t_s[0]),
+        samples=int(series.t_s.size),
+    )
