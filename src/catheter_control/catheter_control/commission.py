@@ -225,6 +225,7 @@ class Commission:
     def __post_init__(self) -> None:
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self.state = State(self.out_dir, self.choice, self.protocol)
+        self.state.save()  # the directory belongs to this rig from now on
         self.rig = CommissionRig(self.choice, self.out_dir / "logs")
 
     # -- paths ----------------------------------------------------------------------------

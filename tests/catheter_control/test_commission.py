@@ -1,0 +1,168 @@
+"""commission without a rig: its steps' bookkeeping, the rig check, the choice and what it writes."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from catheter_control import commission as cm
+from catheter_control.commission_rig import ResponseCheck, RigChoice, signal_duration_s
+from catheter_models.errors import CatheterError
+from catheter_models.signals import TEST_TRAJECTORIES
+
+
+def _job(tmp_path: Path, plant: str = "", clstm_budget_s: float = 0.0) -> cm.Commission:
+    return cm.Commission(
+        out_dir=tmp_path / "out",
+        choice=RigChoice("sim", plant, "/catheter"),
+        protocol="quick",
+        clstm_budget_s=clstm_budget_s,
+        explain_steps=1,
+        workers=1,
+        control_rate_hz=250.0,
+        show_progress=False,
+    )
+
+
+def test_a_done_step_is_not_run_again_while_its_outputs_exist(tmp_path: Path) -> None:
+    job = _job(tmp_path)
+    out = tmp_path / "made"
+    calls: list[int] = []
+
+    def run(rec: cm.StepRecord) -> None:
+        calls.append(1)
+        out.write_text("x")
+        rec.commands.append("catheter-lab something")
+
+    job.step("s", "a step", run, out)
+    job.step("s", "a step", run, out)
+    assert len(calls) == 1
+    # A second process (the rerun a person types) reads the same state.
+    again = _job(tmp_path)
+    again.step("s", "a step", run, out)
+    assert len(calls) == 1
+    assert again.state.steps["s"].commands == ["catheter-lab something"]
+    # Outputs gone: redone.
+    out.unlink()
+    again.step("s", "a step", run, out)
+    assert len(calls) == 2
+
+
+def test_a_failed_step_is_not_recorded_as_done(tmp_path: Path) -> None:
+    job = _job(tmp_path)
+
+    def fail(rec: cm.StepRecord) -> None:
+        raise cm.StepError("no")
+
+    with pytest.raises(cm.StepError):
+        job.step("s", "a step", fail)
+    assert not job.state.done("s")
+    assert "s" not in json.loads((job.out_dir / cm.STATE_FILE).read_text()).get("steps", {})
+
+
+def test_a_directory_made_on_another_plant_is_refused(tmp_path: Path) -> None:
+    _job(tmp_path)
+    with pytest.raises(CatheterError, match="choose a new directory"):
+        _job(tmp_path, plant="my_lab.rod:make_plant")
+
+
+def _fake_runs(job: cm.Commission, rmse: dict[str, list[float]]) -> None:
+    """Candidates' model dirs, the tuned gains and their runs' scores, as if followed."""
+    job.tune_dir.mkdir(parents=True)
+    (job.tune_dir / "feedback.json").write_text('{"kp": 1}\n')
+    for kind, values in rmse.items():
+        d = job.candidate_dir(kind)
+        d.mkdir(parents=True)
+        (d / "manifest.json").write_text(json.dumps({"kind": kind}))
+        for traj, r in zip(TEST_TRAJECTORIES, values, strict=True):
+            job.state.steps[f"follow:{kind}+pi:{traj}"] = cm.StepRecord(
+                done=True, facts={"rmse_deg": r}
+            )
+
+
+def test_the_candidate_whose_worst_trajectory_is_best_is_written_with_its_gains(
+    tmp_path: Path,
+) -> None:
+    job = _job(tmp_path, clstm_budget_s=60.0)
+    # The c-LSTM is better on average but fails one trajectory badly.
+    _fake_runs(job, {"idrdpi": [0.2, 0.25, 0.22, 0.28], "clstm": [0.05, 0.06, 0.05, 0.5]})
+    assert job._select() == 0
+    model = job.out_dir / cm.MODEL_DIR
+    assert json.loads((model / "manifest.json").read_text())["kind"] == "idrdpi"
+    assert (model / "feedback.json").read_text() == '{"kp": 1}\n'
+    commissioned = json.loads((model / cm.COMMISSIONED_FILE).read_text())
+    assert commissioned["compensator"] == "idrdpi"
+    assert commissioned["feedback"] == "pi"
+    assert commissioned["misses"] == {}
+    assert job.state.done("select")
+
+
+def test_a_miss_of_the_target_is_said_in_the_exit_code_and_the_record(tmp_path: Path) -> None:
+    job = _job(tmp_path)
+    _fake_runs(job, {"idrdpi": [0.2, 0.45, 0.22, 0.28]})
+    assert job._select() == cm.EXIT_BELOW_TARGET
+    commissioned = json.loads((job.out_dir / cm.MODEL_DIR / cm.COMMISSIONED_FILE).read_text())
+    assert commissioned["misses"] == {TEST_TRAJECTORIES[1]: 0.45}
+
+
+def test_nothing_is_chosen_from_incomplete_runs(tmp_path: Path) -> None:
+    job = _job(tmp_path)
+    _fake_runs(job, {"idrdpi": [0.2, 0.25, 0.22, 0.28]})
+    del job.state.steps[f"follow:idrdpi+pi:{TEST_TRAJECTORIES[0]}"]
+    with pytest.raises(cm.StepError, match="no candidate completed"):
+        job._select()
+    assert not (job.out_dir / cm.MODEL_DIR).exists()
+
+
+@pytest.mark.parametrize(
+    ("spans", "problem"),
+    [
+        ((2.9, 2.9, 25.0), ""),
+        ((2.9, 0.01, 0.0), "the valve does not move"),
+        ((2.9, 2.9, 0.02), "the tip does not move"),
+        ((0.1, 0.1, 1.0), "did not reach the valve"),
+        # A stiff catheter that still bends a few degrees is a rig that responds.
+        ((2.9, 2.9, 3.0), ""),
+    ],
+)
+def test_the_response_check_names_what_does_not_move(
+    spans: tuple[float, float, float], problem: str
+) -> None:
+    check = ResponseCheck("train", *spans, duration_s=60.0, samples=15000)
+    found = check.problem()
+    if problem:
+        assert problem in found
+    else:
+        assert found == ""
+
+
+def test_the_protocols_are_signals_excite_knows() -> None:
+    for protocol in cm.PROTOCOLS:
+        signals = cm.protocol_signals(protocol)
+        assert set(signals) == {"train", "test"}
+        # Training and held-out data never share a signal.
+        assert not set(signals["train"]) & set(signals["test"])
+        # Fast steps in the training set: tune needs them.
+        assert any(s.startswith("lab_steps_") for s in signals["train"])
+    full = cm.protocol_signals("full")
+    assert 200.0 < signal_duration_s(full["train"]) < 300.0
+    assert 100.0 < signal_duration_s(full["test"]) < 160.0
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["-o", "x", "--plant", "m:f"], "--plant needs --sim or --emulated-rig"),
+        (["-o", "x", "--sim", "--clstm-budget-s", "-1"], "--clstm-budget-s must be >= 0"),
+        (["-o", "x", "--sim", "--trajectories", "traj_nope"], "unknown trajectories"),
+    ],
+)
+def test_bad_arguments_are_refused_by_name(
+    argv: list[str], message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as exc:
+        cm.main(argv)
+    assert exc.value.code == 2
+    assert message in capsys.readouterr().err
