@@ -1,4 +1,4 @@
-"""commission without a rig: its steps' bookkeeping, the rig check, the choice and what it writes."""
+"""commission without a rig: its steps' bookkeeping, the rig check, the choice, what it writes."""
 
 from __future__ import annotations
 

@@ -82,8 +82,8 @@ def write_report(job: Commission, failure: str) -> Path:
         parts.append(
             f"<p><b>Commissioned:</b> {html.escape(str(f['compensator']))} with feedback "
             f"{html.escape(str(f['feedback']))}, in <code>{_rel(job.out_dir / MODEL_DIR, out)}"
-            f"</code>: <code>follow_trajectory --model-dir {html.escape(str(job.out_dir / MODEL_DIR))}"
-            "</code></p>"
+            "</code>: <code>follow_trajectory --model-dir "
+            f"{html.escape(str(job.out_dir / MODEL_DIR))}</code></p>"
         )
         if f.get("misses"):
             misses = ", ".join(f"{t} ({r:.3f}°)" for t, r in f["misses"].items())
@@ -116,7 +116,8 @@ def write_report(job: Commission, failure: str) -> Path:
             f"<p><b>{part}</b> ({html.escape(str(bag))}): {check.get('duration_s', 0):.0f} s, "
             f"{check.get('samples', 0)} samples at the model rate; command spans "
             f"{check.get('command_span_bar', 0):.2f} bar, measured pressure "
-            f"{check.get('measured_span_bar', 0):.2f} bar, bend {check.get('bend_span_deg', 0):.1f}°.</p>"
+            f"{check.get('measured_span_bar', 0):.2f} bar, bend "
+            f"{check.get('bend_span_deg', 0):.1f}°.</p>"
         )
         plot = _recording_plot(bag, out / f"recording_{part}.png")
         if plot is not None:
