@@ -5,7 +5,9 @@ One graph for the whole story a client lives through, to keep the suite short: g
 compensator must refuse come back with its reason and move nothing, a goal with path and goal
 tolerances runs to its end on the rig and succeeds (its trajectory republished on the topic
 for the record, without the compensator running it twice), and a cancel mid-run ends with the
-pressure command at zero.
+pressure command at zero. A second graph, with feedback, lives through the hold of a goal's
+last point: the bend stays there after the result, the next goal goes on from it or (one
+that starts from rest, as a lead-in does) has it released first, and ``~/stop`` releases it.
 """
 
 from __future__ import annotations
@@ -14,20 +16,31 @@ import math
 import time
 from typing import Any
 
+import numpy as np
 import pytest
 from action_msgs.msg import GoalStatus
 from builtin_interfaces.msg import Duration
 from control_msgs.action import FollowJointTrajectory
 from control_msgs.msg import JointTolerance
-from graph_utils import Children, Probe, gauge_pa, trajectory_msg
+from diagnostic_msgs.msg import DiagnosticArray
+from graph_utils import Children, Probe, diagnostic_values, gauge_pa, statuses, trajectory_msg
 from rclpy.action.client import ActionClient
-from sensor_msgs.msg import FluidPressure
+from sensor_msgs.msg import FluidPressure, JointState
+from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from catheter_control.bringup import sim_graph_specs
+from catheter_control.trajectory import with_lead_in
 from catheter_control.trajectory_action import ACTION_NAME
-from catheter_models.contract import BEND_JOINT, PRESSURE_COMMAND, TRAJECTORY
+from catheter_models.contract import (
+    BEND_JOINT,
+    DIAGNOSTICS,
+    PRESSURE_COMMAND,
+    TIP_ANGLE,
+    TRAJECTORY,
+)
 from catheter_ros import qos
+from catheter_ros.messages import angle_rad_from
 
 pytestmark = [
     pytest.mark.slow,
@@ -104,7 +117,8 @@ def test_refusals_success_and_cancel_over_dds(children: Children) -> None:
 
         # Cancelled mid-run: the goal ends CANCELED, and only once the command is at zero,
         # long before the plan would have ended.
-        probe.spin_for(1.5)  # the previous run's ramp-down is over
+        probe.spin_for(1.5)  # the previous goal's last point (0 deg) is held; this one
+        # starts there (from rest) and goes on from the hold
         commands.clear()
         feedback = []
         handle = _send(probe, client, _goal([(2.0, 15.0), (10.0, 15.0), (12.0, 0.0)]), feedback)
@@ -122,3 +136,87 @@ def test_refusals_success_and_cancel_over_dds(children: Children) -> None:
         gauge = gauge_pa(commands)
         assert gauge.max() > 1.0e5, "the catheter was never pressurised before the cancel"
         assert gauge[-1] == pytest.approx(0.0, abs=1.0), f"last command {gauge[-1]:.0f} Pa"
+
+
+def _held_goal(points_deg: list[tuple[float, float]]) -> Any:
+    """A goal whose last point must be reached within 2 deg within 1 s of its end."""
+    goal = _goal(points_deg)
+    goal.goal_tolerance = [JointTolerance(name=BEND_JOINT, position=math.radians(2.0))]
+    goal.goal_time_tolerance = Duration(sec=1)
+    return goal
+
+
+def _since(stamped: list[Any], t0_s: float) -> list[Any]:
+    return [m for m in stamped if m.mono_s >= t0_s]
+
+
+def test_the_last_point_is_held_until_a_new_goal_or_stop(children: Children) -> None:
+    # Feedback on the laser's bend (docs/closed_loop.md) holds the bend where it was asked.
+    children.graph(sim_graph_specs(None, compensator_params={"feedback": "pi"}))
+    with Probe(children.domain_id) as probe:
+        commands = probe.subscribe(FluidPressure, PRESSURE_COMMAND.name, qos.KEEP_EVERY_SAMPLE)
+        tips = probe.subscribe(JointState, TIP_ANGLE.name, qos.KEEP_EVERY_SAMPLE)
+        diags = probe.subscribe(DiagnosticArray, DIAGNOSTICS.name, 50)
+        client = ActionClient(probe.node, FollowJointTrajectory, ACTION_NAME)
+        stop = probe.node.create_client(Trigger, "compensator/stop")
+        assert probe.spin_until(lambda: client.server_is_ready() and bool(tips), 40.0), (
+            f"no {ACTION_NAME} server or no tip angle:\n{children.all_logs()}"
+        )
+
+        def bends_deg(since_s: float) -> Any:
+            return [math.degrees(angle_rad_from(m.msg)) for m in _since(tips, since_s)]
+
+        # Up to 15 deg and held: the goal tolerance is met on the hold (before the hold, the
+        # pressure ramped down at the end and this ended GOAL_TOLERANCE_VIOLATED 15 deg off).
+        response = _result(probe, _send(probe, client, _held_goal([(2.0, 15.0)]), []), 30.0)
+        assert response.status == GoalStatus.STATUS_SUCCEEDED, response.result.error_string
+        held_from = time.monotonic()
+        probe.spin_for(2.5)
+        held = bends_deg(held_from)
+        assert len(held) > 200, f"{len(held)} tip samples in 2.5 s of the hold"
+        assert max(abs(b - 15.0) for b in held) < 1.0, (min(held), max(held))
+        holding = [
+            s.message
+            for s in statuses(_since(diags, held_from), "catheter/compensator")
+            if diagnostic_values(s)["state"] == "holding"
+        ]
+        assert holding and holding[-1].startswith("holding 15.00 deg for "), holding
+
+        # A goal that starts at the held bend goes on from it: the pressure never lets go.
+        sent = time.monotonic()
+        goal = _held_goal([(0.0, 15.0), (1.5, 10.0)])
+        response = _result(probe, _send(probe, client, goal, []), 30.0)
+        assert response.status == GoalStatus.STATUS_SUCCEEDED, response.result.error_string
+        gauge = gauge_pa(_since(commands, held_from))
+        assert gauge.min() > 0.5e5, f"the hold let go before the next goal: {gauge.min():.0f} Pa"
+        assert min(bends_deg(sent)) > 8.0, "the bend fell on the way from 15 to 10 deg"
+
+        # A goal that starts from rest, as follow_trajectory's and commission's lead-in does
+        # (rest up to 8 deg, then the trajectory from there): the hold at 10 deg is released
+        # at the slew limit and the goal starts from rest, with no step of the set-point.
+        probe.spin_for(0.5)
+        t_s, angle_rad, _ = with_lead_in(
+            [0.0, 1.0], [math.radians(8.0), math.radians(12.0)], approach_s=1.0, settle_s=1.0
+        )
+        goal = _held_goal([(t, math.degrees(a)) for t, a in zip(t_s, angle_rad, strict=True)])
+        assert goal.trajectory.points[0].positions[0] == 0.0
+        sent = time.monotonic()
+        response = _result(probe, _send(probe, client, goal, []), 30.0)
+        assert response.status == GoalStatus.STATUS_SUCCEEDED, response.result.error_string
+        gauge = gauge_pa(_since(commands, sent))
+        assert gauge.min() == pytest.approx(0.0, abs=1.0), "the hold was not released first"
+        assert "released the hold at 10.00 deg" in children.all_logs(tail_lines=200)
+
+        # ~/stop releases the hold: the pressure ramps down to zero and the catheter goes
+        # back towards straight.
+        probe.spin_for(1.0)
+        assert min(bends_deg(time.monotonic() - 0.8)) > 10.0, "12 deg was not held"
+        assert probe.spin_until(stop.service_is_ready, 10.0)
+        stopped = stop.call_async(Trigger.Request())
+        assert probe.spin_until(stopped.done, 10.0)
+        stopped_at = time.monotonic()
+        probe.spin_for(1.5)
+        gauge = gauge_pa(_since(commands, stopped_at))
+        assert gauge[-1] == pytest.approx(0.0, abs=1.0), f"last command {gauge[-1]:.0f} Pa"
+        assert np.all(np.diff(gauge) <= 1.0), "a stop only lowers the pressure"
+        assert max(bends_deg(time.monotonic() - 0.3)) < 2.0, "the bend stayed up after ~/stop"
