@@ -132,3 +132,22 @@ def test_commission_stops_on_a_rig_that_does_not_respond(
     # Nothing was fitted on the recording of a rig that does not respond.
     assert not (out / "forward").exists() and not (out / "candidates").exists()
     assert "Not commissioned" in (out / "report" / "index.html").read_text()
+
+
+def test_commission_on_a_running_graph_refuses_one_whose_compensator_runs(
+    children: Children, tmp_path: Path
+) -> None:
+    from catheter_control.bringup import sim_graph_specs
+    from catheter_control.commission import EXIT_GRAPH
+
+    argv = [sys.executable, "-m", "catheter_control.commission", "-o", str(tmp_path / "c")]
+    # Nothing runs in the domain: the drivers are named as missing.
+    done = children.run("commission_alone", argv, timeout_s=120.0)
+    assert done.returncode == EXIT_GRAPH, done.stderr
+    assert "start the rig's drivers first" in done.stderr
+    # A graph with a compensator: it would fight the excitations, so commission refuses.
+    children.graph(sim_graph_specs(None, with_compensator=True))
+    done = children.run("commission_beside", argv, timeout_s=120.0)
+    assert done.returncode == EXIT_GRAPH, done.stderr
+    assert "/catheter/compensator is running" in done.stderr
+    assert not (tmp_path / "c" / MODEL_DIR).exists()

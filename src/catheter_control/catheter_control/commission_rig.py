@@ -46,6 +46,9 @@ _EXCITE_TAIL_S = 1.0
 _EXCITE_START_WAIT_S = 30.0
 """How long ``excite`` waits for the rig and the recorder to subscribe (discovery on a busy
 host can take seconds; a rig that never listens is named after this)."""
+_DISCOVERY_S = 2.0
+"""How long a look at a running graph lasts at least: DDS discovery on one host takes well
+under a second, but a node found late would be a node that fights the excitations."""
 _SETTLE_S = 2.0
 """Rest between runs: the muscle empties and the tip comes back before the next one starts."""
 
@@ -204,38 +207,43 @@ class CommissionRig:
             self._devices = None
 
     def _check_running(self) -> None:
-        """Drivers publish in the namespace and no compensator commands the valve."""
+        """Drivers publish in the namespace and nothing else commands the valve."""
         import rclpy
         from rclpy.node import Node
 
         ns = self.choice.namespace.rstrip("/")
-        deadline = time.monotonic() + min(self.timeout_s, 10.0)
+        sensors = [f"{ns}/pressure/measured", f"{ns}/tip/angle"]
+        command = f"{ns}/pressure/command"
+        start = time.monotonic()
         with rclpy.init(args=["commission"]):
             node = Node("commission_probe")
             topics: set[str] = set()
-            nodes: set[str] = set()
-            # Discovery is gradual: keep looking until both sensor streams show up.
-            while time.monotonic() < deadline:
-                rclpy.spin_once(node, timeout_sec=0.2)
+            # Discovery is gradual: look for at least _DISCOVERY_S (a commanding node found
+            # late is still found), and up to the timeout for the drivers to show up.
+            while time.monotonic() - start < _DISCOVERY_S:
+                rclpy.spin_once(node, timeout_sec=0.1)
+            while time.monotonic() - start < min(self.timeout_s, 10.0):
                 topics = {name for name, _ in node.get_topic_names_and_types()}
-                nodes = {
-                    f"{n_ns.rstrip('/')}/{name}"
-                    for name, n_ns in node.get_node_names_and_namespaces()
-                }
-                if {f"{ns}/pressure/measured", f"{ns}/tip/angle"} <= topics:
+                if set(sensors) <= topics:
                     break
+                rclpy.spin_once(node, timeout_sec=0.2)
+            commanders = sorted(
+                f"{info.node_namespace.rstrip('/')}/{info.node_name}"
+                for info in node.get_publishers_info_by_topic(command)
+            )
             node.destroy_node()
-        missing = [t for t in ("pressure/measured", "tip/angle") if f"{ns}/{t}" not in topics]
+        missing = [t for t in sensors if t not in topics]
         if missing:
             raise RigError(
-                f"no {', '.join(f'{ns}/{t}' for t in missing)} in this ROS domain "
+                f"no {', '.join(missing)} in this ROS domain "
                 f"(ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')}): start the rig's "
                 "drivers first (docs/rig.md), or use --sim / --emulated-rig"
             )
-        if f"{ns}/compensator" in nodes:
+        if commanders:
             raise RigError(
-                f"{ns}/compensator is running: it commands the valve every tick and would fight "
-                "the excitations; start the drivers without it (commission starts its own)"
+                f"{', '.join(commanders)} is running and publishes {command}: it would fight the "
+                "excitations; start the drivers without it (commission starts its own "
+                "compensator)"
             )
 
     # -- steps on top of it ---------------------------------------------------------------
