@@ -418,3 +418,26 @@ def test_feedback_holds_the_rig_at_the_last_point() -> None:
     assert core.state == ControlCore.HOLDING
     hold = np.degrees(angles[int(3.0 * RATE_HZ) :])  # 1 s into the hold, to its end
     assert np.all(np.abs(hold - 15.0) < 0.5), (hold.min(), hold.max())
+
+
+@pytest.mark.parametrize(("end_deg", "held"), [(0.0, False), (0.5, False), (1.0, True)])
+def test_a_plan_that_ends_at_rest_is_not_held_but_ramped_down(end_deg: float, held: bool) -> None:
+    # Straight is zero pressure: a last point within the rest band (0.8 deg here, one tick
+    # at 200 deg/s) ends with the ramp-down, so nothing stays pressurised or watched.
+    core = ControlCore(
+        LinearCompensator(),
+        0.0,
+        3e5,
+        1e7,
+        hold_timeout_s=60.0,
+        rest_angle_rad=0.0,
+        rest_band_rad=math.radians(200.0) / RATE_HZ,
+    )
+    t = np.array([0.0, 1.0, 2.0])
+    plan = TrajectoryPlan.from_knots(
+        t, np.radians([0.0, 15.0, end_deg]), TrajectoryLimits(), RATE_HZ
+    )
+    core.start(plan, 0.0)
+    run(core, 0.0, int(2.5 * RATE_HZ))
+    assert core.state == (ControlCore.HOLDING if held else ControlCore.IDLE)
+    assert core.ended == (plan, "")

@@ -7,9 +7,11 @@ and faults on ``/diagnostics``. Service ``~/stop`` (std_srvs/Trigger) ramps the 
 
 After a trajectory's last point the node holds that bend (the same compensator and feedback
 go on) until a new trajectory replaces the hold, ``~/stop`` or a cancel releases it, or
-``hold_timeout_s`` passes; then it ramps down. A new trajectory goes on from the hold when it
-starts at the held bend; any other starts from rest, so the hold is released first (ramped
-down at the slew limit) and the trajectory starts once the command is at zero.
+``hold_timeout_s`` passes; then it ramps down. A trajectory that ends at rest (straight) is
+not held: it ramps down at its end, zero pressure being the rest. A new trajectory goes on
+from the hold when it starts at the held bend; any other starts from rest, so the hold is
+released first (ramped down at the slew limit) and the trajectory starts once the command
+is at zero.
 
 With ``require_pressure_measured`` (default on) or ``require_tip_angle`` (default off: a
 patient has no tip sensor), a run does not start without that stream, and ramps down when it
@@ -227,6 +229,8 @@ class CompensatorNode(LifecycleLoopNode):
                 self.slew_pa_per_s,
                 feedback,
                 hold_timeout_s=self.hold_timeout_s,
+                rest_angle_rad=self.limits.min_angle_rad,
+                rest_band_rad=self._same_place_rad(),
             )
         if self.accept_trajectories:
             # Subscribed from configure, not activate: a trajectory latched (transient local)
@@ -234,7 +238,7 @@ class CompensatorNode(LifecycleLoopNode):
             self._trajectory_sub = self.create_subscription(
                 JointTrajectory, TRAJECTORY.name, self._on_trajectory, qos.TRAJECTORY
             )
-            self._action = TrajectoryActionServer(self, self)
+            self._action = TrajectoryActionServer(self, self, stamp_ns=self.stamp_ns)
         else:
             self.get_logger().warning(
                 "accept_trajectories is false: trajectory is not subscribed, the catheter "
@@ -406,14 +410,18 @@ class CompensatorNode(LifecycleLoopNode):
         )
         return None
 
-    def _goes_on_from(self, plan: TrajectoryPlan, held_rad: float) -> bool:
-        """Whether ``plan`` starts at the held bend.
+    def _same_place_rad(self) -> float:
+        """How far apart two set-points may be and count as one place [rad].
 
-        At it means no farther off than the plan's own rate limit lets the set-point move in
-        one control tick: going on from there is no faster than the plan itself may be.
+        No farther than the plan limits let the set-point move in one control tick: going
+        from one to the other is no faster than a plan itself may be. Used for "starts at
+        the held bend" and "ends at rest".
         """
-        step_rad = self.limits.max_rate_rad_s / self.rate_hz
-        return abs(float(plan.angle_rad[0]) - held_rad) <= step_rad + 1e-12
+        return self.limits.max_rate_rad_s / self.rate_hz
+
+    def _goes_on_from(self, plan: TrajectoryPlan, held_rad: float) -> bool:
+        """Whether ``plan`` starts at the held bend (see :meth:`_same_place_rad`)."""
+        return abs(float(plan.angle_rad[0]) - held_rad) <= self._same_place_rad() + 1e-12
 
     def _on_trajectory(self, msg: JointTrajectory, info: MessageInfo) -> None:
         if self._action is not None and self._action.is_echo(info):
@@ -449,6 +457,7 @@ class CompensatorNode(LifecycleLoopNode):
                 ended=tuple(e for e in (self._dropped, core and core.ended) if e),
                 idle=self._pending is None and state == ControlCore.IDLE,
                 holding=holding,
+                at_s=now_s,
             )
 
     def _on_stop(self, _req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:

@@ -6,9 +6,11 @@ pressure, adds the feedback on the measured bend when there is one
 limits its slew (:func:`~catheter_models.feedback.limit_window`, the one rule for both).
 Once the plan has run out it holds the plan's last point: the same compensator and
 feedback go on commanding that bend, as ros2_controllers' trajectory controller holds its
-last point, until a new plan replaces the hold or ``hold_timeout_s`` has passed. When a hold
-times out, a stop is asked for or a required sensor goes stale, it ramps the pressure down
-to zero at the slew limit and goes idle: the valve driver's watchdog does the rest.
+last point, until a new plan replaces the hold or ``hold_timeout_s`` has passed. A plan that
+ends at rest (straight) is not held: zero pressure is the rest, so it ramps down as before.
+When a hold times out, a stop is asked for or a required sensor goes stale, it ramps the
+pressure down to zero at the slew limit and goes idle: the valve driver's watchdog does the
+rest.
 
 A model fitted at one sample rate is stepped at that rate whatever the loop's rate: it reads
 the plan at its own sample instants (the plan is known ahead, so it can step one sample early)
@@ -85,6 +87,9 @@ class ControlCore:
             ramp-down is never corrected.
         hold_timeout_s: how long the last point of a plan is held before the pressure ramps
             down [s]; 0: no hold, the ramp-down starts at the plan's end.
+        rest_angle_rad, rest_band_rad: a plan whose last point is within ``rest_band_rad``
+            of ``rest_angle_rad`` (straight) ends at rest: it is not held, the pressure ramps
+            down at its end (zero pressure holds a straight catheter, with nothing watched).
     """
 
     IDLE = "idle"
@@ -105,6 +110,8 @@ class ControlCore:
         feedback: PIDFeedback | None = None,
         *,
         hold_timeout_s: float = 0.0,
+        rest_angle_rad: float = 0.0,
+        rest_band_rad: float = 0.0,
     ) -> None:
         if not (math.isfinite(hold_timeout_s) and hold_timeout_s >= 0.0):
             # A hold that never ends would keep the catheter bent after its client is gone.
@@ -123,6 +130,8 @@ class ControlCore:
         self.max_pressure_pa = max_pressure_pa
         self.max_slew_pa_per_s = max_slew_pa_per_s
         self.hold_timeout_s = hold_timeout_s
+        self.rest_angle_rad = rest_angle_rad
+        self.rest_band_rad = rest_band_rad
         self.plan: TrajectoryPlan | None = None
         self._start_s = 0.0
         self._hold_start_s = 0.0
@@ -150,6 +159,11 @@ class ControlCore:
     def _end(self, why: str) -> None:
         if self.state in (self.FOLLOWING, self.HOLDING) and self.plan is not None:
             self.ended = (self.plan, why)
+
+    def _holds(self, plan: TrajectoryPlan) -> bool:
+        """Whether ``plan``'s last point is held after its end (not rest, and a hold is on)."""
+        off_rest_rad = abs(float(plan.angle_rad[-1]) - self.rest_angle_rad)
+        return self.hold_timeout_s > 0.0 and off_rest_rad > self.rest_band_rad
 
     @property
     def hold_angle_rad(self) -> float | None:
@@ -249,7 +263,7 @@ class ControlCore:
             if self.state == self.FOLLOWING and elapsed > self.plan.duration_s:
                 self._end("")
                 # Past its end the plan reads its last point: following it on is the hold.
-                self.state = self.HOLDING if self.hold_timeout_s > 0.0 else self.RAMPING_DOWN
+                self.state = self.HOLDING if self._holds(self.plan) else self.RAMPING_DOWN
                 self._hold_start_s = self._start_s + self.plan.duration_s
             if self.state == self.HOLDING and now_s - self._hold_start_s > self.hold_timeout_s:
                 self._end(f"hold released after hold_timeout_s ({self.hold_timeout_s:g} s)")
