@@ -13,7 +13,10 @@ compensator the same message and get the same checks (:meth:`TrajectoryRunner.su
   topic); the old goal is aborted with ``INVALID_GOAL`` and "pre-empted".
 * **Feedback** at ``feedback_rate_hz`` (20 Hz): desired, measured (``tip/angle``; left empty
   without a fresh sample) and error (desired - measured) of the bend, and the goal point in
-  force.
+  force. Its header stamp and ``time_from_start`` are read at one instant and stamped as
+  the compensator stamps ``angle/desired``, so stamp minus ``time_from_start`` is the stamp
+  of the plan's first set-point: a client tells the plan's set-points from a hold's before
+  it (``trajectory_client`` does).
 * **Tolerances.** ``path_tolerance`` and ``goal_tolerance`` positions for ``bend`` are
   checked against ``tip/angle`` (a goal that sets one is refused when no tip angle arrives).
   The path is checked at the feedback rate; a violation stops the run (the pressure ramps
@@ -69,6 +72,7 @@ from catheter_models.contract import BEND_JOINT, TIP_ANGLE, TRAJECTORY
 from catheter_models.units import rad_to_deg
 from catheter_ros import messages, qos
 from catheter_ros.polled import PolledTopics
+from catheter_ros.rt_loop import MonotonicStamper
 
 ACTION_NAME = "follow_joint_trajectory"
 """In the graph's namespace, beside the ``trajectory`` topic."""
@@ -109,6 +113,8 @@ class RunProgress:
     """No plan pending or followed and the pressure command is down to zero."""
     holding: TrajectoryPlan | None = None
     """The plan whose last point is being held now (it ran to its end)."""
+    at_s: float | None = None
+    """The monotonic instant ``elapsed_s`` was read at [s] (None: just now)."""
 
 
 class TrajectoryRunner(Protocol):
@@ -173,7 +179,8 @@ class TrajectoryActionServer:
 
     Nothing here blocks the executor: a goal's execute callback awaits a future that the
     supervising timer completes. ``clock`` is the monotonic clock of ``tip/angle`` receipts
-    and of the runner's plan time.
+    and of the runner's plan time; ``stamp_ns`` turns its instants into ROS stamps (the
+    compensator's ``stamp_ns``).
     """
 
     def __init__(
@@ -184,13 +191,18 @@ class TrajectoryActionServer:
         action_name: str = ACTION_NAME,
         feedback_rate_hz: float = 20.0,
         clock: Callable[[], float] = time.monotonic,
+        stamp_ns: Callable[[float], int] | None = None,
     ) -> None:
         if not feedback_rate_hz > 0.0:
             raise ValueError(f"feedback_rate_hz must be > 0, got {feedback_rate_hz}")
         self._node = node
         self._runner = runner
         self._clock = clock
+        # The compensator's own monotonic-to-ROS mapping when it gives one, so feedback and
+        # angle/desired stamps agree to the nanosecond; else one of our own.
+        self._stamp_ns = stamp_ns or MonotonicStamper(node.get_clock().now().nanoseconds).ns
         self._goals: list[_Goal] = []
+        self._stamp_now_ns = 0
         self._tip: tuple[float, float] | None = None  # (received at [s], bend [rad])
         # Taken at the feedback rate, not dispatched 250 times a second by the executor that
         # the compensator's control thread shares the GIL with (see catheter_ros.polled);
@@ -361,6 +373,10 @@ class TrajectoryActionServer:
         if not self._goals:
             return
         progress = self._runner.trajectory_progress()
+        # The instant the plan time was read at: the feedback's stamp and time_from_start
+        # go together to the nanosecond.
+        at_s = progress.at_s if progress.at_s is not None else self._clock()
+        self._stamp_now_ns = self._stamp_ns(at_s)
         for goal in list(self._goals):
             self._supervise(goal, progress, now_s, measured)
 
@@ -443,7 +459,7 @@ class TrajectoryActionServer:
         self, goal: _Goal, elapsed_s: float, desired: float, measured: float | None
     ) -> None:
         fb = FollowJointTrajectory.Feedback()
-        fb.header.stamp = self._node.get_clock().now().to_msg()
+        fb.header.stamp = messages.time_from_ns(self._stamp_now_ns)
         fb.joint_names = [BEND_JOINT]
         t = Duration(sec=int(elapsed_s), nanosec=int((elapsed_s % 1.0) * 1e9))
         fb.desired = JointTrajectoryPoint(positions=[desired], time_from_start=t)

@@ -204,10 +204,31 @@ class _Client:
         goal = _goal(plan)
         record.desired.clear()
         plan_time_s = [0.0]  # of the newest feedback: the bar shows the compensator's clock
+        plan_started = [False]
 
         def on_feedback(msg: Any) -> None:
             elapsed = msg.feedback.desired.time_from_start
             plan_time_s[0] = elapsed.sec + elapsed.nanosec * 1e-9
+            if not plan_started[0]:
+                plan_started[0] = True
+                # Set-points heard before the plan's first one are the compensator's hold of
+                # an earlier trajectory's last point, not this run's: the feedback's stamp
+                # minus its time_from_start is the stamp of the plan's first set-point.
+                first_s = (
+                    ns_from_time(msg.feedback.header.stamp)
+                    - elapsed.sec * NS_PER_S
+                    - elapsed.nanosec
+                ) * 1e-9
+                kept = [
+                    (t, v)
+                    for t, v in zip(record.desired.t_s, record.desired.values, strict=True)
+                    if t >= first_s - 1e-6
+                ]
+                if len(kept) < len(record.desired.t_s):
+                    record.desired.clear()
+                    for t, v in kept:
+                        record.desired.append(t, v)
+                    record.started_at_s = time.monotonic() - plan_time_s[0]
 
         sending: Future[ClientGoalHandle[Any, Any, Any]] = self.action.send_goal_async(
             goal, feedback_callback=on_feedback
