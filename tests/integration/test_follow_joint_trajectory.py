@@ -33,6 +33,7 @@ from catheter_control.bringup import sim_graph_specs
 from catheter_control.trajectory import with_lead_in
 from catheter_control.trajectory_action import ACTION_NAME
 from catheter_models.contract import (
+    ANGLE_DESIRED,
     BEND_JOINT,
     DIAGNOSTICS,
     PRESSURE_COMMAND,
@@ -40,7 +41,7 @@ from catheter_models.contract import (
     TRAJECTORY,
 )
 from catheter_ros import qos
-from catheter_ros.messages import angle_rad_from
+from catheter_ros.messages import angle_rad_from, ns_from_time
 
 pytestmark = [
     pytest.mark.slow,
@@ -117,8 +118,7 @@ def test_refusals_success_and_cancel_over_dds(children: Children) -> None:
 
         # Cancelled mid-run: the goal ends CANCELED, and only once the command is at zero,
         # long before the plan would have ended.
-        probe.spin_for(1.5)  # the previous goal's last point (0 deg) is held; this one
-        # starts there (from rest) and goes on from the hold
+        probe.spin_for(1.5)  # the previous run's ramp-down is over (it ended at rest: no hold)
         commands.clear()
         feedback = []
         handle = _send(probe, client, _goal([(2.0, 15.0), (10.0, 15.0), (12.0, 0.0)]), feedback)
@@ -156,6 +156,7 @@ def test_the_last_point_is_held_until_a_new_goal_or_stop(children: Children) -> 
     with Probe(children.domain_id) as probe:
         commands = probe.subscribe(FluidPressure, PRESSURE_COMMAND.name, qos.KEEP_EVERY_SAMPLE)
         tips = probe.subscribe(JointState, TIP_ANGLE.name, qos.KEEP_EVERY_SAMPLE)
+        desired = probe.subscribe(JointState, ANGLE_DESIRED.name, qos.RECORD)
         diags = probe.subscribe(DiagnosticArray, DIAGNOSTICS.name, 50)
         client = ActionClient(probe.node, FollowJointTrajectory, ACTION_NAME)
         stop = probe.node.create_client(Trigger, "compensator/stop")
@@ -201,11 +202,26 @@ def test_the_last_point_is_held_until_a_new_goal_or_stop(children: Children) -> 
         goal = _held_goal([(t, math.degrees(a)) for t, a in zip(t_s, angle_rad, strict=True)])
         assert goal.trajectory.points[0].positions[0] == 0.0
         sent = time.monotonic()
-        response = _result(probe, _send(probe, client, goal, []), 30.0)
+        feedback: list[Any] = []
+        response = _result(probe, _send(probe, client, goal, feedback), 30.0)
         assert response.status == GoalStatus.STATUS_SUCCEEDED, response.result.error_string
         gauge = gauge_pa(_since(commands, sent))
         assert gauge.min() == pytest.approx(0.0, abs=1.0), "the hold was not released first"
         assert "released the hold at 10.00 deg" in children.all_logs(tail_lines=200)
+        # A client tells the plan's set-points from the hold's by the feedback: its stamp
+        # minus time_from_start is the stamp of the plan's first set-point (at rest), and
+        # the one before it is still the released hold's 10 deg.
+        fb = feedback[0].feedback
+        first_ns = (
+            ns_from_time(fb.header.stamp)
+            - fb.desired.time_from_start.sec * 1_000_000_000
+            - fb.desired.time_from_start.nanosec
+        )
+        stamps = np.array([ns_from_time(m.msg.header.stamp) for m in desired])
+        k = int(np.argmin(np.abs(stamps - first_ns)))
+        assert abs(stamps[k] - first_ns) < 1_000, f"{stamps[k] - first_ns} ns off a set-point"
+        assert angle_rad_from(desired[k].msg) == pytest.approx(0.0, abs=1e-6)
+        assert math.degrees(angle_rad_from(desired[k - 1].msg)) == pytest.approx(10.0)
 
         # ~/stop releases the hold: the pressure ramps down to zero and the catheter goes
         # back towards straight.
@@ -218,5 +234,8 @@ def test_the_last_point_is_held_until_a_new_goal_or_stop(children: Children) -> 
         probe.spin_for(1.5)
         gauge = gauge_pa(_since(commands, stopped_at))
         assert gauge[-1] == pytest.approx(0.0, abs=1.0), f"last command {gauge[-1]:.0f} Pa"
-        assert np.all(np.diff(gauge) <= 1.0), "a stop only lowers the pressure"
+        # Heard after the answer, some commands were sent before it (the hold's, which the
+        # feedback moves by tens of Pa): from the highest on, the ramp only goes down.
+        ramp = gauge[int(np.argmax(gauge)) :]
+        assert ramp.size > 5 and np.all(np.diff(ramp) <= 0.0), "a stop only lowers the pressure"
         assert max(bends_deg(time.monotonic() - 0.3)) < 2.0, "the bend stayed up after ~/stop"
