@@ -8,12 +8,16 @@ for the record, without the compensator running it twice), and a cancel mid-run 
 pressure command at zero. A second graph, with feedback, lives through the hold of a goal's
 last point: the bend stays there after the result, the next goal goes on from it or (one
 that starts from rest, as a lead-in does) has it released first, and ``~/stop`` releases it.
+A third holds a trajectory sent on the topic and loses its laser during the hold.
 """
 
 from __future__ import annotations
 
 import math
+import signal
+import sys
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -22,8 +26,16 @@ from action_msgs.msg import GoalStatus
 from builtin_interfaces.msg import Duration
 from control_msgs.action import FollowJointTrajectory
 from control_msgs.msg import JointTolerance
-from diagnostic_msgs.msg import DiagnosticArray
-from graph_utils import Children, Probe, diagnostic_values, gauge_pa, statuses, trajectory_msg
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from graph_utils import (
+    Children,
+    Probe,
+    diagnostic_values,
+    gauge_pa,
+    node_argv,
+    statuses,
+    trajectory_msg,
+)
 from rclpy.action.client import ActionClient
 from sensor_msgs.msg import FluidPressure, JointState
 from std_srvs.srv import Trigger
@@ -35,6 +47,7 @@ from catheter_control.trajectory_action import ACTION_NAME
 from catheter_models.contract import (
     ANGLE_DESIRED,
     BEND_JOINT,
+    DEFAULT_NAMESPACE,
     DIAGNOSTICS,
     PRESSURE_COMMAND,
     TIP_ANGLE,
@@ -239,3 +252,78 @@ def test_the_last_point_is_held_until_a_new_goal_or_stop(children: Children) -> 
         ramp = gauge[int(np.argmax(gauge)) :]
         assert ramp.size > 5 and np.all(np.diff(ramp) <= 0.0), "a stop only lowers the pressure"
         assert max(bends_deg(time.monotonic() - 0.3)) < 2.0, "the bend stayed up after ~/stop"
+
+
+def test_a_laser_gone_quiet_during_the_hold_ramps_it_down_and_says_why(
+    children: Children,
+) -> None:
+    # The rig's laser goes through a relay process (a stand-in laser driver) that the test
+    # stops with SIGSTOP, as a hung driver would, while the rig runs on.
+    relay = children.start(
+        "angle_relay",
+        [
+            sys.executable,
+            str(Path(__file__).with_name("angle_relay.py")),
+            "--ros-args",
+            "-r",
+            f"__ns:={DEFAULT_NAMESPACE}",
+        ],
+    )
+    sim = node_argv("catheter_driver.sim_hardware_node")
+    children.start("sim_hardware", [*sim, "-r", f"{TIP_ANGLE.name}:=tip/angle_raw"])
+    children.start(
+        "compensator",
+        node_argv(
+            "catheter_control.compensator_node",
+            {"compensator": "none", "require_tip_angle": True},
+        ),
+    )
+    with Probe(children.domain_id) as probe:
+        commands = probe.subscribe(FluidPressure, PRESSURE_COMMAND.name, qos.KEEP_EVERY_SAMPLE)
+        diags = probe.subscribe(DiagnosticArray, DIAGNOSTICS.name, 50)
+        pub = probe.node.create_publisher(JointTrajectory, TRAJECTORY.name, qos.TRAJECTORY)
+        assert probe.spin_until(
+            lambda: (
+                pub.get_subscription_count() > 0
+                and bool(statuses(diags, "catheter/compensator"))
+                and bool(statuses(diags, "catheter/sim_hardware"))
+            ),
+            40.0,
+        ), f"graph not up:\n{children.all_logs()}"
+
+        # On the topic, not the action: the hold is the compensator's, whichever way it came.
+        pub.publish(trajectory_msg([(0.0, 0.0), (1.5, 15.0)]))
+
+        def holding() -> bool:
+            last = statuses(diags, "catheter/compensator")[-1]
+            return diagnostic_values(last)["state"] == "holding"
+
+        assert probe.spin_until(holding, 10.0), children.all_logs()
+        assert gauge_pa(commands[-25:]).min() > 1.0e5, "not holding 15 deg"
+
+        n_diag = len(diags)
+        relay.send_signal(signal.SIGSTOP)
+        try:
+            t_fault = time.monotonic()
+            found = probe.spin_until(
+                lambda: any(
+                    s.level == DiagnosticStatus.ERROR
+                    for s in statuses(diags[n_diag:], "catheter/compensator")
+                ),
+                5.0,
+            )
+            probe.spin_for(0.5)
+        finally:
+            relay.send_signal(signal.SIGCONT)
+        assert found, [s.message for s in statuses(diags, "catheter/compensator")[-3:]]
+        status = next(
+            s
+            for s in statuses(diags[n_diag:], "catheter/compensator")
+            if s.level == DiagnosticStatus.ERROR
+        )
+        assert status.message.startswith("stopped: tip/angle stale: no sample for"), status.message
+        assert status.message.endswith("ramped down"), status.message
+        ramp = gauge_pa([m for m in commands if m.mono_s > t_fault])
+        assert ramp.size > 0 and ramp[-1] == 0.0, ramp[-5:]
+        down = ramp[int(np.argmax(ramp)) :]
+        assert np.all(np.diff(down) <= 1e-6), "the ramp-down went up"
