@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import io
 import json
 import math
@@ -179,7 +180,7 @@ class _Tee(io.TextIOBase):
 @contextlib.contextmanager
 def _captured() -> Iterator[_Tee]:
     tee = _Tee(sys.stdout)
-    with contextlib.redirect_stdout(tee):  # type: ignore[type-var]
+    with contextlib.redirect_stdout(tee):
         yield tee
 
 
@@ -288,7 +289,7 @@ class Commission:
             self.step(
                 f"record_{part}",
                 f"record the {part} excitation ({', '.join(signals[part])})",
-                lambda rec, part=part: self._record(part, signals[part], rec),
+                functools.partial(self._record, part, signals[part]),
                 self.bag(part),
             )
         train, test = str(self.bag("train")), str(self.bag("test"))
@@ -342,7 +343,7 @@ class Commission:
                 self.step(
                     f"follow:{candidate.name}:{trajectory}",
                     f"follow {trajectory} with {candidate.name}",
-                    lambda rec, c=candidate, t=trajectory, d=run_dir: self._follow(c, t, d, rec),
+                    functools.partial(self._follow, candidate, trajectory, run_dir),
                     run_dir / "report.json",
                 )
         return self._select()
