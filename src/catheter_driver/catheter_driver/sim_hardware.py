@@ -2,7 +2,9 @@
 
 It takes the place of the valve, the laser and both drivers (docs/simulated_rig.md), so it
 keeps the drivers' safety duties too: commands are checked and clamped, and a watchdog vents
-the muscle when commands stop arriving.
+the muscle when commands stop arriving. The plant behind it is the shipped simulator or one
+of your own (``catheter_models.plant.interface``); a plant that breaks its contract while
+running is stopped and the valve vented, as the watchdog does.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from dataclasses import dataclass
 
 from catheter_driver.command_order import CommandOrder
 from catheter_models.contract import COMMAND_TIMEOUT_S, MAX_PRESSURE_PA
-from catheter_models.plant import Plant, PlantConfig, PlantSample
+from catheter_models.plant import CheckedPlant, PlantConfig, PlantRunError, PlantSample, make_plant
 
 
 @dataclass(frozen=True)
@@ -41,9 +43,12 @@ class SimHardware:
     """Plant + driver safety: command intake, clamping, watchdog, stepping.
 
     Args:
-        config: plant configuration.
+        config: plant configuration (the shipped plant's; a plant of your own takes only
+            the rig's ambient pressure and straight-tip distance from it).
         max_pressure_pa: highest gauge pressure ever applied [Pa]; higher commands clamp.
         command_timeout_s: vent when no command has arrived for this long [s].
+        plant: the checked plant to step (:func:`~catheter_models.plant.make_plant`); the
+            shipped plant built from ``config`` by default.
     """
 
     def __init__(
@@ -51,8 +56,13 @@ class SimHardware:
         config: PlantConfig,
         max_pressure_pa: float = MAX_PRESSURE_PA,
         command_timeout_s: float = COMMAND_TIMEOUT_S,
+        plant: CheckedPlant | None = None,
     ) -> None:
-        self.plant = Plant(config)
+        self.plant = plant if plant is not None else make_plant("", config)
+        self.rate_hz = self.plant.rate_hz
+        """The sample rate the rig runs at: the plant's [Hz]."""
+        self.fault = ""
+        """Why the plant was stopped ('' while it runs): see :meth:`stop`."""
         self.max_pressure_pa = max_pressure_pa
         self.command_timeout_s = command_timeout_s
         self._lock = threading.Lock()
@@ -80,6 +90,9 @@ class SimHardware:
         """
         with self._lock:
             self._received += 1
+            if self.fault:
+                self.last_refusal = f"refused: the plant was stopped ({self.fault})"
+                return False
             if not math.isfinite(gauge_pa):
                 self._refused += 1
                 self.last_refusal = f"refused non-finite pressure command {gauge_pa!r}"
@@ -97,8 +110,15 @@ class SimHardware:
             return True
 
     def step(self, now_s: float) -> PlantSample:
-        """Advance the plant one sample with the command in force at monotonic ``now_s``."""
+        """Advance the plant one sample with the command in force at monotonic ``now_s``.
+
+        Raises:
+            PlantRunError: the plant broke its contract on this step, or was stopped before
+                (:attr:`fault`); it is stopped and the valve vented (:meth:`stop`).
+        """
         with self._lock:
+            if self.fault:
+                raise PlantRunError(self.fault)
             stale = (
                 self._last_command_s is None
                 or now_s - self._last_command_s > self.command_timeout_s
@@ -109,7 +129,34 @@ class SimHardware:
             if stale:
                 self._order.forget()
             command = 0.0 if self._venting else self._command_pa
-        return self.plant.step(command)
+        try:
+            sample = self.plant.step_sample(command)
+        except PlantRunError as exc:
+            self.stop(str(exc))
+            raise
+        if self.fault:  # stopped from another thread while this step ran (stuck_reason)
+            raise PlantRunError(self.fault)
+        return sample
+
+    def stop(self, reason: str) -> None:
+        """Stop the plant for good and vent: command 0, every later command refused.
+
+        For a plant that broke its contract (:class:`PlantRunError`) or one stuck in a step
+        (:meth:`CheckedPlant.stuck_reason`). The first reason is kept in :attr:`fault`.
+        """
+        with self._lock:
+            if not self.fault:
+                self.fault = reason
+            self._venting = True
+            self._command_pa = 0.0
+            self._order.forget()
+
+    def stuck_reason(self) -> str:
+        """Why the plant counts as too slow while a step runs ('' if not).
+
+        See :meth:`CheckedPlant.stuck_reason`; called from another thread than the stepping one.
+        """
+        return self.plant.stuck_reason()
 
     def step_through(
         self, k: int, deadline_s: float, period_s: float
@@ -136,7 +183,7 @@ class SimHardware:
 
     @property
     def venting(self) -> bool:
-        """Whether the watchdog holds the valve vented (no recent command)."""
+        """Whether the valve is held vented (no recent command, or the plant was stopped)."""
         return self._venting
 
     @property

@@ -4,12 +4,19 @@ Subscribes ``pressure/command``; publishes ``pressure/measured``, ``tip/distance
 ``tip/angle`` at the plant's sample rate (250 Hz), stamped on the plant's clock, and its health
 on ``/diagnostics``. Parameters ``effects.<name>.enabled`` and ``effects.<name>.<param>``
 switch and size every effect of docs/simulated_rig.md; ``rig.<param>`` sets the rig.
+``plant:=module:factory`` (or ``path/to/file.py:factory``) puts a plant of your own behind the
+rig instead of the shipped one (docs/simulated_rig.md, "Your own plant"); the node then runs
+at that plant's ``rate_hz``.
 
-Lifecycle: *configure* builds the simulated plant (the "device") and warms it up; *activate*
-starts the sample loop (publishing, taking commands); *deactivate* stops it, so nothing is
-published or applied; *cleanup*/*shutdown* drop the plant. Commands that arrive while
-inactive are counted away, never applied. ``autostart:=true`` configures and activates at
-start-up for a node run alone.
+Lifecycle: *configure* builds the plant (the "device"), checks it and warms it up; a plant
+that cannot be loaded or breaks its contract fails the transition with the reason (on
+/diagnostics and in the log). *activate* starts the sample loop (publishing, taking commands);
+*deactivate* stops it, so nothing is published or applied; *cleanup*/*shutdown* drop the
+plant. A plant that breaks its contract while running (raises, returns a non-finite value,
+cannot keep its rate) is stopped, the valve vented, /diagnostics says ERROR with the reason,
+and the node deactivates itself; it activates again only after cleanup and configure.
+Commands that arrive while inactive are counted away, never applied. ``autostart:=true``
+configures and activates at start-up for a node run alone.
 """
 
 from __future__ import annotations
@@ -29,6 +36,7 @@ from catheter_models.contract import (
     TIP_DISTANCE,
 )
 from catheter_models.errors import CatheterError
+from catheter_models.plant import PlantRunError, make_plant
 from catheter_models.plant.config import EFFECTS, RIG_PARAMS, ParamSpec, PlantConfig
 from catheter_ros import diagnostics, messages, qos
 from catheter_ros.loop_node import LifecycleLoopNode
@@ -51,6 +59,8 @@ _TIMEOUT = ParamSpec(
     5.0,
     "vent when commands stop for longer than this [s]",
 )
+_PLANT_WATCH_PERIOD_S = 0.2
+"""How often the executor looks for a stopped or stuck plant, to report it and deactivate."""
 
 
 class SimHardwareNode(LifecycleLoopNode):
@@ -58,6 +68,15 @@ class SimHardwareNode(LifecycleLoopNode):
 
     def __init__(self) -> None:
         super().__init__("sim_hardware")
+        self.plant_spec = str(
+            declare_plain(
+                self,
+                "plant",
+                "",
+                "the plant behind the rig: module:factory or path/to/file.py:factory of a plant "
+                "of your own ('' = the shipped simulator; docs/simulated_rig.md)",
+            )
+        )
         seed = declare_int(
             self, "seed", 0, low=0, high=2**31 - 1, doc="noise seed of the simulated rig"
         )
@@ -91,36 +110,49 @@ class SimHardwareNode(LifecycleLoopNode):
         self.commands_ignored_inactive = 0
         """Commands that arrived while the rig was not active: never applied."""
         self._latency = LatencyWindow()
+        self._fault_reported = False
         self.create_timer(1.0, self._publish_diagnostics)
+        self.create_timer(_PLANT_WATCH_PERIOD_S, self._watch_plant)
 
     # -- lifecycle -----------------------------------------------------------------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Build the simulated plant and warm it up."""
+        """Build the plant, check it at rest and warm it up."""
         try:
             hw = SimHardware(
                 self.config,
                 max_pressure_pa=self._max_pressure_pa,
                 command_timeout_s=self._command_timeout_s,
+                plant=make_plant(self.plant_spec, self.config),
             )
-            hw.plant.warm_up()
         except (CatheterError, ValueError) as exc:
             self.fail_transition("configure", str(exc))
             return TransitionCallbackReturn.FAILURE
+        self.transition_failure = ""
+        self._fault_reported = False
+        self.rate_hz = hw.rate_hz
         geom = hw.plant.geometry
         self._range_limits_m = (
             float(geom.voltage_to_distance_m(0.0)),
             float(geom.voltage_to_distance_m(10.0)),
         )
         self.hw = hw
-        on = [n for n in EFFECTS if self.config.enabled(n)]
-        self.get_logger().info(
-            f"simulated rig at {self.rate_hz:g} Hz, effects on: {', '.join(on) or 'none'}"
-        )
+        if hw.plant.shipped:
+            on = [n for n in EFFECTS if self.config.enabled(n)]
+            what = f"effects on: {', '.join(on) or 'none'}"
+        else:
+            what = f"plant {hw.plant.name} (tip/distance derived from its bend)"
+        self.get_logger().info(f"simulated rig at {self.rate_hz:g} Hz, {what}")
         return TransitionCallbackReturn.SUCCESS
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Start sampling, publishing and taking commands."""
         assert self.hw is not None  # the state machine activates configured nodes only
+        if self.hw.fault:
+            self.fail_transition(
+                "activate",
+                f"the plant was stopped ({self.hw.fault}); cleanup and configure load it again",
+            )
+            return TransitionCallbackReturn.FAILURE
         # Whatever came while inactive is old news: counted, never applied.
         self.commands_ignored_inactive += len(self._commands.take())
         self.hw.reset_ticks()
@@ -161,15 +193,45 @@ class SimHardwareNode(LifecycleLoopNode):
         # through every missed sample and publish the backlog with its true stamps, as a
         # sensor driver drains its buffer. Stamps are the sampling instants (monotonic
         # deadlines mapped to ROS time), so bags align across nodes.
-        for sample_time_s, sample in hw.step_through(k, deadline_s, loop.period_s):
-            stamp_ns = self.stamp_ns(sample_time_s)
-            self._pub_pressure.publish(
-                messages.fluid_pressure(sample.pressure_measured_pa, stamp_ns, "", self.ambient_pa)
-            )
-            self._pub_distance.publish(
-                messages.laser_range(sample.distance_m, stamp_ns, *self._range_limits_m)
-            )
-            self._pub_angle.publish(messages.joint_state(sample.angle_rad, stamp_ns))
+        try:
+            for sample_time_s, sample in hw.step_through(k, deadline_s, loop.period_s):
+                stamp_ns = self.stamp_ns(sample_time_s)
+                self._pub_pressure.publish(
+                    messages.fluid_pressure(
+                        sample.pressure_measured_pa, stamp_ns, "", self.ambient_pa
+                    )
+                )
+                self._pub_distance.publish(
+                    messages.laser_range(sample.distance_m, stamp_ns, *self._range_limits_m)
+                )
+                self._pub_angle.publish(messages.joint_state(sample.angle_rad, stamp_ns))
+        except PlantRunError:
+            # hw has vented and keeps the reason; the loop ends here, and the executor
+            # reports it and deactivates the node (_watch_plant): no logging on this thread.
+            loop.stop()
+
+    def _watch_plant(self) -> None:
+        """Stop a plant stuck in a step; report a stopped one once, and deactivate.
+
+        Runs on the executor (the loop thread does not log or change state): the report is
+        the log's error and /diagnostics ERROR with the reason.
+        """
+        hw = self.hw
+        if hw is None:
+            return
+        if not hw.fault:
+            stuck = hw.stuck_reason()
+            if not stuck:
+                return
+            hw.stop(stuck)
+        if self._fault_reported:
+            return
+        self._fault_reported = True
+        self.get_logger().error(f"plant stopped, valve vented: {hw.fault}")
+        self._publish_diagnostics()
+        if self.active_loop is not None:
+            self.trigger_deactivate()
+            self._publish_diagnostics()
 
     def destroy_node(self) -> None:
         """Stop the loop (which takes the commands) before their helper node goes."""
@@ -180,6 +242,23 @@ class SimHardwareNode(LifecycleLoopNode):
 
     def _publish_diagnostics(self) -> None:
         hw, loop = self.hw, self.active_loop
+        if hw is not None and hw.fault:
+            # Stopped by its plant: ERROR while configured, active or not, until cleanup.
+            diagnostics.publish_status(
+                self._pub_diag,
+                self,
+                level=diagnostics.ERROR,
+                message=f"plant stopped, valve vented: {hw.fault}",
+                values={
+                    "plant": self.plant_spec or "shipped",
+                    "venting": hw.venting,
+                    "command_bar": f"{hw.command_pa / 1e5:.4f}",
+                    "samples": hw.ticks_done,
+                    "commands_ignored_inactive": self.commands_ignored_inactive,
+                },
+                hardware_id="sim_hardware",
+            )
+            return
         if hw is None or loop is None:
             diagnostics.publish_status(
                 self._pub_diag,
@@ -217,7 +296,11 @@ class SimHardwareNode(LifecycleLoopNode):
             "behind_max_ms": f"{loop.take_worst_behind_s() * 1e3:.3f}",
             **self._latency.summary_ms(),
         }
-        values.update(self.config.describe())
+        if hw.plant.shipped:
+            values.update(self.config.describe())
+        else:
+            values["plant"] = self.plant_spec
+            values["rate_hz"] = f"{hw.rate_hz:g}"
         diagnostics.publish_status(
             self._pub_diag,
             self,

@@ -6,6 +6,13 @@ each have their own module; this one parses the arguments, builds and wires them
 them until told to stop. Run it for integration tests (bringup starts it the same way)::
 
     python -m catheter_driver.emulators.rig --keller-pty --dac-pty --adc-pty
+    python -m catheter_driver.emulators.rig --keller-pty --dac-pty --adc-pty \
+        --plant my_lab.rod:make_plant     # a plant of your own (docs/simulated_rig.md)
+
+A plant that cannot be loaded or breaks its contract at rest is refused before anything
+starts (exit 2, the reason on stderr). One that breaks it while running (raises, returns a
+non-finite value, cannot keep its rate) is stopped and the valve vented; the program then
+says why on stderr and exits 1, closing its devices, so the drivers see them go.
 
 It prints one JSON line (flushed) mapping each emulated device's backend name to the
 parameters that reach it, e.g.
@@ -55,7 +62,7 @@ from catheter_driver.emulators.pty_endpoint import PtyDevice, PtyEndpoint
 from catheter_driver.emulators.rig_core import EmulatedRig
 from catheter_driver.transports.can_transport import CanTransport
 from catheter_models.errors import ParameterError
-from catheter_models.plant import PlantConfig
+from catheter_models.plant import CheckedPlant, PlantConfig, PlantError, make_plant
 from catheter_ros.rt_loop import DEFAULT_RT_PRIORITY
 
 
@@ -123,6 +130,13 @@ def _build_parser() -> argparse.ArgumentParser:
         "graph it serves starves it",
     )
     p.add_argument(
+        "--plant",
+        default="",
+        metavar="MODULE:FACTORY",
+        help="a plant of your own behind the devices: module:factory or path/to/file.py:factory "
+        "(default: the shipped simulator; docs/simulated_rig.md, 'Your own plant')",
+    )
+    p.add_argument(
         "--plant-param",
         action="append",
         default=[],
@@ -136,17 +150,20 @@ def _build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the emulated rig until SIGINT/SIGTERM; see the module docstring for the output."""
     args = _build_parser().parse_args(argv)
+    if args.rt_priority < 0 or args.rt_priority > 99:
+        print(f"error: --rt-priority must be 0..99, got {args.rt_priority}", file=sys.stderr)
+        return 2
     try:
         config = _parse_plant_params(args.plant_param, args.seed)
         if not args.failsafe_timeout_s > 0.0:
             raise ParameterError(f"--failsafe-timeout-s must be > 0, got {args.failsafe_timeout_s}")
-    except ParameterError as exc:
+        plant: CheckedPlant = make_plant(args.plant, config)
+    except (ParameterError, PlantError) as exc:
+        # --plant-param and --seed set the shipped plant; make_plant names any a plant of
+        # your own would ignore (as "rig.<name>", "effects.<name>...", "seed").
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    if args.rt_priority < 0 or args.rt_priority > 99:
-        print(f"error: --rt-priority must be 0..99, got {args.rt_priority}", file=sys.stderr)
-        return 2
-    rig = EmulatedRig(config, rt_priority=args.rt_priority)
+    rig = EmulatedRig(config, plant=plant, rt_priority=args.rt_priority)
     own_dir = args.link_dir is None
     link_dir = Path(tempfile.mkdtemp(prefix="emulated-rig-")) if own_dir else args.link_dir
     link_dir.mkdir(parents=True, exist_ok=True)
@@ -233,6 +250,13 @@ def _run(rig: EmulatedRig, ports: dict[str, dict[str, Any]], control: RigControl
     ).start()
     try:
         while not done.wait(0.5):
+            if rig.check_plant():
+                print(
+                    f"error: the plant was stopped and the valve vented: {rig.fault}",
+                    file=sys.stderr,
+                    flush=True,
+                )
+                return 1
             if not rig.running:
                 print("error: the rig's loop stopped", file=sys.stderr)
                 return 1

@@ -2,7 +2,9 @@
 
 :class:`EmulatedRig` owns a :class:`~catheter_driver.sim_hardware.SimHardware` and steps it
 at the plant's sample rate (250 Hz) on a deadline loop. Device emulators read its sensors
-and feed it valve set-points, each over its own wire protocol.
+and feed it valve set-points, each over its own wire protocol. The plant is the shipped
+simulator or one of your own (docs/simulated_rig.md, "Your own plant"); one that breaks its
+contract while running is stopped, the valve vented, and the rig stops (:attr:`fault`).
 
 It is its own file so the device emulators (``keller``, ``dac_bridge``, ``canopen_ao``,
 ``laser_adc``) can depend on it without depending on the command-line program
@@ -21,7 +23,7 @@ from typing import Any
 
 from catheter_driver.emulators.base import Emulator
 from catheter_driver.sim_hardware import SimHardware
-from catheter_models.plant import PlantConfig, PlantSample
+from catheter_models.plant import CheckedPlant, PlantConfig, PlantRunError, PlantSample
 from catheter_ros.rt_loop import DeadlineLoop, set_process_realtime
 
 SampleListener = Callable[[PlantSample, float], None]
@@ -40,6 +42,8 @@ class EmulatedRig:
 
     Args:
         config: plant configuration; the thesis rig by default.
+        plant: the checked plant (:func:`~catheter_models.plant.make_plant`); the shipped
+            plant built from ``config`` by default.
         max_pressure_pa: highest set-point applied, gauge [Pa]; the valve's maximum by default.
         command_timeout_s: vent after this long without a set-point [s]. A real regulator
             holds its last set-point forever (the driver node owns the watchdog), hence inf.
@@ -53,6 +57,7 @@ class EmulatedRig:
         self,
         config: PlantConfig | None = None,
         *,
+        plant: CheckedPlant | None = None,
         max_pressure_pa: float | None = None,
         command_timeout_s: float = math.inf,
         rt_priority: int = 0,
@@ -64,11 +69,13 @@ class EmulatedRig:
         limit_pa = (
             max_pressure_pa if max_pressure_pa is not None else config.rig["valve_max_pressure_pa"]
         )
-        self.hw = SimHardware(config, max_pressure_pa=limit_pa, command_timeout_s=command_timeout_s)
+        self.hw = SimHardware(
+            config, max_pressure_pa=limit_pa, command_timeout_s=command_timeout_s, plant=plant
+        )
         self.config = config
         self.geometry = self.hw.plant.geometry
         self.ambient_pa = float(config.rig["ambient_pressure_pa"])
-        self.sample_rate_hz = float(config.rig["sample_rate_hz"])
+        self.sample_rate_hz = self.hw.rate_hz
         self._period_s = 1.0 / self.sample_rate_hz
         self._listeners: list[SampleListener] = []
         self._emulators: list[Emulator] = []
@@ -106,8 +113,7 @@ class EmulatedRig:
 
     # -- running -----------------------------------------------------------------------
     def start(self) -> None:
-        """Compile the plant, start stepping it, then start the attached emulators."""
-        self.hw.plant.warm_up()
+        """Start stepping the plant (checked and warmed up when made), then the emulators."""
         self.hw.reset_ticks()
         self._origin_s = None
         self._loop = DeadlineLoop(
@@ -133,8 +139,25 @@ class EmulatedRig:
 
     @property
     def running(self) -> bool:
-        """Whether the plant is being stepped."""
-        return self._loop is not None and self._loop.running
+        """Whether the plant is being stepped (not once it was stopped: :attr:`fault`)."""
+        return self._loop is not None and self._loop.running and not self.hw.fault
+
+    @property
+    def fault(self) -> str:
+        """Why the plant was stopped and the valve vented ('' while it runs)."""
+        return self.hw.fault
+
+    def check_plant(self) -> str:
+        """Stop a plant stuck in a step (see :meth:`SimHardware.stuck_reason`); the fault.
+
+        Call it from a thread other than the rig's loop, now and then (the program does,
+        twice a second): a step that never returns cannot report itself.
+        """
+        if not self.hw.fault:
+            reason = self.hw.stuck_reason()
+            if reason:
+                self.hw.stop(reason)
+        return self.hw.fault
 
     def __enter__(self) -> EmulatedRig:
         self.start()
@@ -159,6 +182,8 @@ class EmulatedRig:
             if self._origin_s is None:
                 self._origin_s = deadline_s - k * self._period_s
             self._take_samples(k, deadline_s)
+        if self.hw.fault and self._loop is not None:
+            self._loop.stop()  # from its own thread: ends after this tick, no join
 
     def _catch_up(self, now_s: float) -> None:
         """Take every sample whose instant is at or before ``now_s``; hold ``_step_lock``.
@@ -175,13 +200,22 @@ class EmulatedRig:
             self._take_samples(k, origin_s + k * self._period_s)
 
     def _take_samples(self, k: int, deadline_s: float) -> None:
-        """Every sample up to ``k`` not taken yet, to :attr:`latest` and the listeners."""
-        for sample_time_s, sample in self.hw.step_through(k, deadline_s, self._period_s):
-            with self._lock:
-                self._latest = sample
-                listeners = tuple(self._listeners)
-            for listener in listeners:
-                listener(sample, sample_time_s)
+        """Every sample up to ``k`` not taken yet, to :attr:`latest` and the listeners.
+
+        A plant that breaks its contract is stopped here, whoever took the sample: the valve
+        is vented (:meth:`SimHardware.stop`), no sample is taken after, and the loop ends.
+        """
+        if self.hw.fault:
+            return
+        try:
+            for sample_time_s, sample in self.hw.step_through(k, deadline_s, self._period_s):
+                with self._lock:
+                    self._latest = sample
+                    listeners = tuple(self._listeners)
+                for listener in listeners:
+                    listener(sample, sample_time_s)
+        except PlantRunError:
+            return  # hw keeps the reason (fault); the loop's tick ends the loop
 
     # -- what the emulators use --------------------------------------------------------
     def command(self, gauge_pa: float) -> bool:
@@ -208,7 +242,9 @@ class EmulatedRig:
         (when the set-point last dropped from above 0 to 0), monotonic [s] or None;
         ``plant_steps`` (samples taken since start) and ``steps_caught_up`` (deadlines the
         rig's loop missed because the host was busy: their samples were taken late, by the
-        loop or by a device catching the plant up, and streamed as a backlog).
+        loop or by a device catching the plant up, and streamed as a backlog); ``plant``
+        (``"shipped"`` or the plant's spec) and ``fault`` (why the plant was stopped, '').
+        A plant of your own gives no truth: ``muscle_pa`` and ``angle_deg`` are then None.
         """
         with self._step_lock:
             self._catch_up(time.monotonic())
@@ -222,12 +258,14 @@ class EmulatedRig:
             "steps_caught_up": None if stats is None else stats.missed,
             "t_s": time.monotonic(),
             "command_pa": self.hw.command_pa,
-            "muscle_pa": None if sample is None else sample.muscle_pressure_pa,
+            "muscle_pa": _known(None if sample is None else sample.muscle_pressure_pa),
             "measured_pa": self.measured_pressure_pa,
-            "angle_deg": None if sample is None else math.degrees(sample.true_angle_rad),
+            "angle_deg": _known(None if sample is None else math.degrees(sample.true_angle_rad)),
             "distance_m": None if sample is None else sample.distance_m,
             "last_command_s": last_s,
             "vented_at_s": vented_s,
+            "plant": "shipped" if self.hw.plant.shipped else self.hw.plant.name,
+            "fault": self.hw.fault,
         }
 
     @property
@@ -243,3 +281,8 @@ class EmulatedRig:
             self._catch_up(time.monotonic())
         sample = self.latest
         return 0.0 if sample is None else sample.pressure_measured_pa
+
+
+def _known(value: float | None) -> float | None:
+    """None for a value the plant does not give (NaN: no truth from a plant of your own)."""
+    return None if value is None or math.isnan(value) else value
