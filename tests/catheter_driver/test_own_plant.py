@@ -493,3 +493,52 @@ def test_a_plant_breaking_its_contract_while_running_deactivates_the_node(
         assert node.trigger_cleanup() == TransitionCallbackReturn.SUCCESS
         assert node.trigger_configure() == TransitionCallbackReturn.SUCCESS
         assert node.hw is not None and not node.hw.fault
+
+
+# -- the emulated rig --------------------------------------------------------------------------
+
+
+def test_the_emulated_rig_refuses_a_plant_before_anything_starts(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    from catheter_driver.emulators import rig
+
+    assert rig.main(["--plant", "no_such_lab.rod:make_plant"]) == 2
+    assert "plant module 'no_such_lab.rod' not found" in capsys.readouterr().err
+    # --plant-param sets the shipped plant: with a plant of your own it is named, not dropped.
+    argv = ["--plant", "foreign_plants.plugin:boucwen", "--plant-param", "creep.enabled=true"]
+    assert rig.main(argv) == 2
+    assert "effects.creep.enabled" in capsys.readouterr().err
+
+
+def test_the_emulated_rig_serves_a_plant_of_its_own_and_stops_one_that_breaks(
+    tmp_path: Path,
+) -> None:
+    import time
+
+    from catheter_driver.emulators.rig_core import EmulatedRig
+
+    spec = "foreign_plants.plugin:boucwen_tip"
+    with EmulatedRig(CONFIG, plant=make_plant(spec, CONFIG)) as rig:
+        assert rig.sample_rate_hz == 250.0
+        rig.command(2.0e5)
+        time.sleep(0.5)
+        state = rig.state()
+        assert state["plant"] == repr(spec) and state["fault"] == ""
+        assert state["plant_steps"] > 0 and state["muscle_pa"] is None
+        assert state["angle_deg"] is None, "a plant of your own gives no truth"
+        assert abs(state["measured_pa"] - 2.0e5) < 0.05e5
+        sample = rig.latest
+        assert sample is not None and math.degrees(sample.angle_rad) > 5.0
+
+    path = _plant_file(tmp_path, _NAN_AFTER_50)
+    with EmulatedRig(CONFIG, plant=make_plant(f"{path}:make", CONFIG)) as rig:
+        rig.command(1.0e5)
+        deadline = time.monotonic() + 10.0
+        while rig.running and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert not rig.running
+        assert "non-finite bend_rad (nan) at sample 51" in rig.check_plant()
+        assert rig.hw.venting and rig.hw.command_pa == 0.0
+        assert rig.state()["plant_steps"] == 51
+        assert not rig.command(1.0e5), "a stopped plant takes no set-point"
