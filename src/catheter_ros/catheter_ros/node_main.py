@@ -17,6 +17,7 @@ from collections.abc import Callable, Sequence
 from types import FrameType
 
 import rclpy
+from rclpy.exceptions import ParameterException
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.experimental.events_executor import EventsExecutor
 from rclpy.node import Node
@@ -79,7 +80,9 @@ def run_nodes(
 
     The nodes are built inside one rclpy context, in order; a :class:`CatheterError` while
     building one (a refused parameter, a model that fails its hash check) is logged as fatal
-    and gives exit code 2; so is an override a node does not declare (``params.
+    and gives exit code 2, as does a parameter of the wrong type (``params._declare`` takes an
+    integer for a double and names any other mismatch; rclpy's own refusal for a parameter
+    declared without it is caught here too); so is an override a node does not declare (``params.
     refuse_undeclared_overrides``). Nodes with ``start()`` are started once all are built (a
     lifecycle node configures and activates itself there only with ``autostart``). On the way
     out every node is closed (``close()``, then ``destroy_node()``, which stops its loops) in
@@ -122,6 +125,11 @@ def run_nodes(
                     break
         except CatheterError as exc:
             rclpy.logging.get_logger("catheter").fatal(str(exc))
+            return 2
+        except ParameterException as exc:
+            # A parameter a node declares with rclpy directly, given with the wrong type or
+            # value: rclpy's message names it and both types; one line, no traceback.
+            rclpy.logging.get_logger("catheter").fatal(f"parameter refused: {exc}")
             return 2
         except ExternalShutdownException:
             pass

@@ -12,8 +12,9 @@ from collections.abc import Iterable
 from typing import Any
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-from rclpy.exceptions import InvalidParameterValueException
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 
 from catheter_models.errors import ParameterError
 from catheter_models.plant.config import ParamSpec
@@ -60,6 +61,40 @@ def declare_plain(node: Node, name: str, default: Any, doc: str, read_only: bool
     return _declare(node, name, default, descriptor)
 
 
+_TYPE_NAMES = {
+    Parameter.Type.BOOL: "a bool (true/false)",
+    Parameter.Type.INTEGER: "an integer",
+    Parameter.Type.DOUBLE: "a double (a number)",
+    Parameter.Type.STRING: "a string",
+}
+
+
+def _type_name(kind: Parameter.Type) -> str:
+    return _TYPE_NAMES.get(kind, kind.name.lower().replace("_", " "))
+
+
+def type_refusal(name: str, expected: Parameter.Type, given: Parameter[Any]) -> str:
+    """One line for a parameter given with the wrong type: its name, the type, what was given."""
+    return (
+        f"parameter {name!r} refused: expects {_type_name(expected)}, "
+        f"got {given.value!r} ({_type_name(given.type_)})"
+    )
+
+
+def _widen_integer_override(node: Node, name: str, default: Any) -> None:
+    """Take an integer override of a double parameter as that double.
+
+    ``-p control_rate_hz:=1000`` is what a person types for 1 kHz; ROS reads ``1000`` as an
+    integer and rclpy refuses it for a double parameter. Every integer is exactly a double
+    up to 2**53, far beyond any of our ranges, so nothing is lost. Nothing else is converted:
+    a string, or a double for an integer parameter, is refused by the caller with its type.
+    """
+    overrides: dict[str, Parameter[Any]] = getattr(node, "_parameter_overrides", {})
+    given = overrides.get(name)
+    if given is not None and isinstance(default, float) and given.type_ == Parameter.Type.INTEGER:
+        overrides[name] = Parameter(name, Parameter.Type.DOUBLE, float(given.value))
+
+
 def _declare(node: Node, name: str, default: Any, descriptor: ParameterDescriptor) -> Any:
     """Declare, or adopt a parameter the node already declared from a command-line override.
 
@@ -67,11 +102,22 @@ def _declare(node: Node, name: str, default: Any, descriptor: ParameterDescripto
     ``lifecycle_node.declare_device_options``), and rclpy declares ``qos_overrides.*`` as
     publishers are made, so a name may exist before we declare it. Its value is still checked
     against the range by the caller.
+
+    Raises:
+        ParameterError: the override has another type than the default's (an integer for a
+            double is taken as the double); one line naming the parameter, the type it
+            expects and what was given.
     """
     if node.has_parameter(name):
         value = node.get_parameter(name).value
         return default if value is None else value
-    return node.declare_parameter(name, default, descriptor).value
+    _widen_integer_override(node, name, default)
+    try:
+        return node.declare_parameter(name, default, descriptor).value
+    except InvalidParameterTypeException:
+        overrides: dict[str, Parameter[Any]] = getattr(node, "_parameter_overrides", {})
+        expected = Parameter.Type.from_parameter_value(default)
+        raise ParameterError(type_refusal(name, expected, overrides[name])) from None
 
 
 ALWAYS_ALLOWED = ("use_sim_time",)
