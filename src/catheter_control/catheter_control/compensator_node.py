@@ -44,6 +44,7 @@ from catheter_control.models import (
     FEEDBACKS,
     load_compensator,
     load_feedback,
+    resolve_compensator,
 )
 from catheter_control.trajectory import TrajectoryLimits, TrajectoryPlan
 from catheter_control.trajectory_action import RunProgress, TrajectoryActionServer
@@ -115,6 +116,10 @@ class CompensatorNode(LifecycleLoopNode):
             )
         )
         self.model_dir = str(declare_plain(self, "model_dir", "", "model directory ('' = shipped)"))
+        # Given, the kind must agree with model_dir's manifest; left out, the manifest says it.
+        self._kind_asked = (
+            self.kind if "compensator" in getattr(self, "_parameter_overrides", {}) else None
+        )
         self.feedback_kind = str(
             declare_plain(
                 self, "feedback", "none", f"feedback on tip/angle: one of {', '.join(FEEDBACKS)}"
@@ -206,6 +211,7 @@ class CompensatorNode(LifecycleLoopNode):
             feedback = load_feedback(
                 self.feedback_kind, self.gains_path, self.model_dir, self.rate_hz
             )
+            self.kind = resolve_compensator(self._kind_asked, self.model_dir)
             compensator = load_compensator(self.kind, self.model_dir)
         except CatheterError as exc:
             self.fail_transition("configure", str(exc))

@@ -28,6 +28,60 @@ SHIPPED_GAINS = "feedback"
 """Directory of the shipped feedback gains (tuned on the simulated rig's recorded steps)."""
 
 
+COMPENSATOR_OF_KIND = {"static_map": "none", "idrdpi": "idrdpi", "clstm": "clstm"}
+"""Model kinds (a manifest's ``kind``) that are compensators, and the compensator each runs as:
+the inverse models, and the quasi-static curve whose inverse ``none`` is."""
+
+
+def compensator_of_model_dir(model_dir: str) -> str:
+    """The compensator a model directory holds, from its manifest's kind (hash-checked).
+
+    Raises:
+        ParameterError: the directory holds a model that is not a compensator (a forward
+            model, named by its kind).
+        ModelDirError: the directory is missing, malformed, or fails its hash check.
+    """
+    from catheter_models.model_dir import read_model_dir
+
+    kind = read_model_dir(Path(model_dir))[0].kind
+    if kind in COMPENSATOR_OF_KIND:
+        return COMPENSATOR_OF_KIND[kind]
+    what = f"a {kind!r} model"
+    from catheter_models.models import MODEL_KINDS, model_class
+
+    if kind in MODEL_KINDS and model_class(kind).direction == "forward":
+        what = f"a {kind!r} forward model (angle from pressure)"
+    raise ParameterError(
+        f"{model_dir} holds {what}, not a compensator; a compensator's model directory holds "
+        f"one of {', '.join(sorted(COMPENSATOR_OF_KIND))} (catheter-lab train idrdpi|clstm)"
+    )
+
+
+def resolve_compensator(kind: str | None, model_dir: str) -> str:
+    """The compensator to run: ``kind`` if given, else the model directory's, else the default.
+
+    With both, the directory's manifest must agree with ``kind``: a c-LSTM directory run as
+    ``idrdpi`` is refused here with both named, before anything starts.
+
+    Raises:
+        ParameterError: unknown ``kind``, a directory that is not a compensator, or one whose
+            kind contradicts ``kind``.
+        ModelDirError: the directory is missing, malformed, or fails its hash check.
+    """
+    if kind is not None and kind not in COMPENSATORS:
+        raise ParameterError(f"unknown compensator {kind!r}; available: {', '.join(COMPENSATORS)}")
+    if not model_dir:
+        return kind or DEFAULT_COMPENSATOR
+    held = compensator_of_model_dir(model_dir)
+    if kind is not None and kind != held:
+        raise ParameterError(
+            f"compensator {kind!r} was asked for, but {model_dir} holds the {held!r} compensator "
+            f"(its manifest's kind); leave the compensator out to run {held!r}, or give a "
+            f"{kind!r} model directory"
+        )
+    return held
+
+
 def shipped_model_dir(name: str = "static_map") -> Path:
     """Directory of a model shipped inside this package (fitted on the simulated rig)."""
     return Path(str(resources.files("catheter_control") / "data" / name))
