@@ -253,7 +253,7 @@ class CheckedPlant:
 
     Args:
         plant: the plant (a :class:`ShippedPlant` gives its own full samples).
-        name: how messages name it (the spec, or "the shipped plant").
+        name: how messages name it (the quoted spec, or "(the shipped plant)").
         straight_distance_m: laser distance with the tip straight [m].
         geometry: laser geometry (thesis constants by default).
         clock: the wall clock the timing is measured on [s].
