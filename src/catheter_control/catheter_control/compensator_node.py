@@ -116,10 +116,10 @@ class CompensatorNode(LifecycleLoopNode):
             )
         )
         self.model_dir = str(declare_plain(self, "model_dir", "", "model directory ('' = shipped)"))
-        # Given, the kind must agree with model_dir's manifest; left out, the manifest says it.
-        self._kind_asked = (
-            self.kind if "compensator" in getattr(self, "_parameter_overrides", {}) else None
-        )
+        # Given, the kind must agree with model_dir's manifest; left out (or '', as the launch
+        # files pass it by default), the manifest says it.
+        given = "compensator" in getattr(self, "_parameter_overrides", {})
+        self._kind_asked = self.kind if given and self.kind else None
         self.feedback_kind = str(
             declare_plain(
                 self, "feedback", "none", f"feedback on tip/angle: one of {', '.join(FEEDBACKS)}"

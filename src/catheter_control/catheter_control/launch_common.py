@@ -82,10 +82,13 @@ def compensator_arguments(
     return [
         DeclareLaunchArgument(
             "compensator",
-            default_value=DEFAULT_COMPENSATOR,
+            # '': the kind model_dir's manifest names, else the default; a kind given beside a
+            # model_dir of another kind fails the compensator's configure with both named.
+            default_value="",
             # Alphabetical, as the launch files have always listed them.
-            choices=sorted(COMPENSATORS),
-            description="feedforward compensator (none: static inverse, no hysteresis model)",
+            choices=["", *sorted(COMPENSATORS)],
+            description="feedforward compensator (none: static inverse, no hysteresis model; "
+            f"'' = the kind model_dir holds, else {DEFAULT_COMPENSATOR})",
         ),
         DeclareLaunchArgument("model_dir", default_value="", description=model_dir_description),
         DeclareLaunchArgument(
@@ -146,6 +149,16 @@ def graph_arguments(run_label: str) -> list[DeclareLaunchArgument]:
             description="new bag directory (must not exist)",
         ),
     ]
+
+
+def plant_argument() -> DeclareLaunchArgument:
+    """``plant``: a lab's own plant (``module:factory``) behind ``sim_hardware``."""
+    return DeclareLaunchArgument(
+        "plant",
+        default_value="",
+        description="the simulated catheter as module:factory (docs/simulated_rig.md); "
+        "'' = the shipped thesis plant",
+    )
 
 
 def rt_priority_parameter() -> ParameterValue:

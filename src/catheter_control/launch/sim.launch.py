@@ -2,6 +2,8 @@
 
     ros2 launch catheter_control sim.launch.py
     ros2 launch catheter_control sim.launch.py compensator:=idrdpi control_rate_hz:=1000.0
+    ros2 launch catheter_control sim.launch.py model_dir:=runs/idrdpi feedback:=pi
+    ros2 launch catheter_control sim.launch.py plant:=my_lab.rod:make_plant
     ros2 launch catheter_control sim.launch.py record:=false namespace:=catheter2
 
 Then, from another shell on the same ROS_DOMAIN_ID, send a trajectory to the running graph
@@ -26,6 +28,7 @@ catheter_control/launch_common.py.
 from launch import LaunchDescription
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import LifecycleNode
+from launch_ros.parameter_descriptions import ParameterValue
 
 from catheter_control.launch_common import (
     compensator_arguments,
@@ -33,6 +36,7 @@ from catheter_control.launch_common import (
     configure_then_activate,
     graph_arguments,
     namespace_argument,
+    plant_argument,
     recorder_node,
     rt_priority_parameter,
     tip_tf_node,
@@ -54,6 +58,7 @@ def generate_launch_description() -> LaunchDescription:
             accept_trajectories_description="false: the compensator does not subscribe to "
             "trajectory",
         ),
+        plant_argument(),
         *graph_arguments("sim"),
     ]
     recorder = recorder_node(
@@ -64,7 +69,12 @@ def generate_launch_description() -> LaunchDescription:
         executable="sim_hardware",
         name="sim_hardware",
         namespace=namespace,
-        parameters=[{"rt_priority": rt_priority}],
+        parameters=[
+            {
+                "rt_priority": rt_priority,
+                "plant": ParameterValue(LaunchConfiguration("plant"), value_type=str),
+            }
+        ],
         output="screen",
     )
     compensator = compensator_node(namespace, rt_priority)
