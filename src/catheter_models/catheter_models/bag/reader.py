@@ -65,6 +65,13 @@ _UNITS: Final = {
 }
 _HELD: Final = frozenset({PRESSURE_COMMAND.name, ANGLE_DESIRED.name})
 """Set-points: each holds until the next, so they are resampled by zero-order hold."""
+HOLD_TOLERANCE: Final = 0.25
+"""A time point this share of a period (the smaller of the time base's and the set-point
+stream's own) or less before a set-point's stamp already takes that set-point. Without it, a
+grid point that falls on a stamp took the previous value whenever float rounding put it a
+femtosecond early, so a command sampled at the grid rate had samples repeated and dropped; a
+quarter period also absorbs a controller's jitter and still never applies a value more than a
+quarter period before its stamp."""
 
 
 def _frozen(values: npt.ArrayLike) -> FloatArray:
@@ -200,15 +207,30 @@ class BagData:
         """Resample the series onto one time base built from header stamps.
 
         Set-points (``pressure/command``, ``angle/desired``) are held from one stamp to the
-        next (zero-order hold), as a valve or controller holds them. Measurements are
-        interpolated linearly. The time base covers only the span every included series
-        covers, so nothing is extrapolated. Optional series (``angle/desired``,
-        ``tip/distance``) are included when loaded and non-empty, and then bound that span too;
-        load without them (``topics=``) to drop them.
+        next (zero-order hold), as a valve or controller holds them: a value stamped at ``s``
+        applies from ``s``, and a time point at most :data:`HOLD_TOLERANCE` of a period before
+        ``s`` (the smaller of the time base's period and the stream's own median interval)
+        already takes it. Measurements are interpolated linearly. The time base covers only
+        the span every included series covers, so nothing is extrapolated (a set-point's span
+        starts that tolerance before its first stamp). Optional series (``angle/desired``,
+        ``tip/distance``) are included when loaded and non-empty, and then bound that span
+        too; load without them (``topics=``) to drop them.
+
+        A uniform grid (``rate_hz``) is laid on the phase of the ``pressure/command`` stamps
+        (their median offset modulo the command's own period), so its points fall on the
+        commands' stamps: a command stream at the grid rate maps one sample to one grid point,
+        none repeated or dropped, whether its stamps are exact, jitter by less than the
+        tolerance, or have lost samples between them; at another rate every grid point takes
+        the latest command, and a command at a whole multiple or fraction of the grid rate
+        keeps a regular pattern (each held the same number of points, or every k-th taken).
+
+        Gaps (see :meth:`gap_report`): over lost samples or a pause a set-point holds its last
+        value until the next stamp, as the valve did, and a measurement is interpolated
+        linearly between the samples either side; the grid is not cut.
 
         Args:
             rate_hz: None: use the stamps of ``reference``. Otherwise a uniform grid at this
-                rate [Hz] starting at the first common stamp.
+                rate [Hz], on the command's phase, from the first such point in the span.
             reference: Contract name of the series whose stamps are the time base.
 
         Raises:
@@ -225,29 +247,46 @@ class BagData:
             msg = f"reference {reference!r} was not loaded; choose one of {sorted(self.series)}"
             raise BagError(msg)
         used = [s for s in (command, measured, angle, desired, distance) if s is not None]
-        start_s = max(float(s.t_s[0]) for s in used)
-        end_s = min(float(s.t_s[-1]) for s in used)
-        if end_s < start_s:
+        if rate_hz is not None and not (math.isfinite(rate_hz) and rate_hz > 0.0):
+            msg = f"rate_hz is {rate_hz}; expected a positive finite rate [Hz] or None"
+            raise ParameterError(msg)
+        # Integer nanoseconds (as the stamps were recorded): a grid point on a stamp compares
+        # equal to it, exactly, instead of by float rounding.
+        stamps_ns = {s.name: _to_ns(s.t_s) for s in used}
+        if rate_hz is None:
+            ref_ns = _to_ns(self._nonempty(reference).t_s)
+            base_period_ns = _median_period_ns(ref_ns)
+        else:
+            base_period_ns = NS_PER_S / rate_hz
+        tolerance_ns = {
+            s.name: _hold_tolerance_ns(stamps_ns[s.name], base_period_ns)
+            for s in used
+            if s.name in _HELD
+        }
+        start_ns = max(float(stamps_ns[s.name][0]) - tolerance_ns.get(s.name, 0.0) for s in used)
+        end_ns = min(float(stamps_ns[s.name][-1]) for s in used)
+        if end_ns < start_ns:
             spans = ", ".join(f"{s.topic} [{s.t_s[0]:.3f}, {s.t_s[-1]:.3f}] s" for s in used)
             msg = f"the series of {self.path} share no common time span: {spans}"
             raise BagError(msg)
         if rate_hz is None:
-            ref_t = self._nonempty(reference).t_s
-            t_s = ref_t[(ref_t >= start_s) & (ref_t <= end_s)]
+            grid_ns = ref_ns[(ref_ns >= start_ns) & (ref_ns <= end_ns)]
         else:
-            if not (math.isfinite(rate_hz) and rate_hz > 0.0):
-                msg = f"rate_hz is {rate_hz}; expected a positive finite rate [Hz] or None"
-                raise ParameterError(msg)
-            # The small epsilon keeps the end sample when the span is a whole number of periods.
-            n = math.floor((end_s - start_s) * rate_hz + 1e-9) + 1
-            t_s = start_s + np.arange(n, dtype=np.float64) / rate_hz
+            grid_ns = _grid_ns(stamps_ns[command.name], start_ns, end_ns, base_period_ns)
+        t_s = grid_ns / NS_PER_S
+
+        def resample(series: StampedSeries) -> FloatArray:
+            if series.name in _HELD:
+                return _hold(series, stamps_ns[series.name], grid_ns, tolerance_ns[series.name])
+            return np.asarray(np.interp(t_s, series.t_s, series.values), dtype=np.float64)
+
         return AlignedSeries(
             t_s=_frozen(t_s),
-            pressure_command_pa=_frozen(_resample(command, t_s)),
-            pressure_measured_pa=_frozen(_resample(measured, t_s)),
-            angle_rad=_frozen(_resample(angle, t_s)),
-            angle_desired_rad=None if desired is None else _frozen(_resample(desired, t_s)),
-            distance_m=None if distance is None else _frozen(_resample(distance, t_s)),
+            pressure_command_pa=_frozen(resample(command)),
+            pressure_measured_pa=_frozen(resample(measured)),
+            angle_rad=_frozen(resample(angle)),
+            angle_desired_rad=None if desired is None else _frozen(resample(desired)),
+            distance_m=None if distance is None else _frozen(resample(distance)),
         )
 
     def _nonempty(self, name: str) -> StampedSeries:
@@ -267,15 +306,59 @@ class BagData:
         return series if series is not None and len(series) > 0 else None
 
 
-def _resample(series: StampedSeries, t_s: FloatArray) -> FloatArray:
-    if series.name in _HELD:
-        return _hold(series, t_s)
-    return np.asarray(np.interp(t_s, series.t_s, series.values), dtype=np.float64)
+def _to_ns(t_s: FloatArray) -> FloatArray:
+    """Stamps [s since the bag start] back to whole nanoseconds (as float64, exact to 2**53)."""
+    return np.round(np.asarray(t_s, dtype=np.float64) * NS_PER_S)
 
 
-def _hold(series: StampedSeries, t_s: FloatArray) -> FloatArray:
-    """Zero-order hold: the last value stamped at or before each time."""
-    index = np.searchsorted(series.t_s, t_s, side="right") - 1
+def _median_period_ns(stamps_ns: FloatArray) -> float:
+    """A stream's period [ns]: its median interval between distinct stamps (NaN if none)."""
+    dt = np.diff(stamps_ns)
+    dt = dt[dt > 0.0]
+    return float(np.median(dt)) if dt.size else math.nan
+
+
+def _hold_tolerance_ns(stamps_ns: FloatArray, base_period_ns: float) -> float:
+    """:data:`HOLD_TOLERANCE` of the smaller of the time base's and the stream's period."""
+    periods = [p for p in (base_period_ns, _median_period_ns(stamps_ns)) if math.isfinite(p)]
+    return HOLD_TOLERANCE * min(periods) if periods else 0.0
+
+
+def _grid_ns(
+    command_ns: FloatArray, start_ns: float, end_ns: float, period_ns: float
+) -> FloatArray:
+    """A uniform grid over [start, end] [ns] through the command stamps' typical phase.
+
+    The phase is the median offset of the command stamps in the span from the first of them,
+    modulo the grid's period (or, for commands faster than the grid, the whole fraction of it
+    nearest their own period) and wrapped to within half of that, so jitter either side of
+    the nominal instants and lost samples do not move it. The modulus is the grid's exact
+    period, not the commands' median interval: over thousands of samples the median's own
+    error would add up to a phase that means nothing. A grid through the phase lies on the
+    commands' nominal stamps, where :data:`HOLD_TOLERANCE` maps each to one point.
+    """
+    inside = command_ns[(command_ns >= start_ns) & (command_ns <= end_ns)]
+    command_period_ns = _median_period_ns(inside)
+    if inside.size < 2 or not math.isfinite(command_period_ns):
+        anchor_ns = start_ns
+    else:
+        modulus_ns = period_ns / max(1, round(period_ns / command_period_ns))
+        offsets = inside - inside[0]
+        wrapped = (offsets + modulus_ns / 2.0) % modulus_ns - modulus_ns / 2.0
+        anchor_ns = float(inside[0] + np.round(np.median(wrapped)))
+    # The first grid point at or after the span's start; the small margins keep a point that
+    # lies on the start or the end when the period is not a whole number of nanoseconds.
+    first = math.ceil((start_ns - anchor_ns) / period_ns - 1e-9)
+    t0_ns = anchor_ns + first * period_ns
+    n = math.floor((end_ns - t0_ns) / period_ns + 1e-9) + 1
+    return t0_ns + np.arange(max(n, 0), dtype=np.float64) * period_ns
+
+
+def _hold(
+    series: StampedSeries, stamps_ns: FloatArray, grid_ns: FloatArray, tolerance_ns: float
+) -> FloatArray:
+    """Zero-order hold: the last value stamped at or before each time plus the tolerance."""
+    index = np.searchsorted(stamps_ns, grid_ns + tolerance_ns, side="right") - 1
     return np.asarray(series.values[np.clip(index, 0, None)], dtype=np.float64)
 
 
