@@ -14,7 +14,20 @@ Shutdown order matters for safety and for the record: the compensator is deactiv
 start order: the rig, and the recorder last so the bag holds the ramp-down and is closed
 cleanly.
 
-ROS arguments after ``--ros-args`` go to every node (``-r __ns:=/x`` sets the namespace).
+ROS arguments after ``--ros-args`` go to every node (``-r __ns:=/x`` sets the namespace), and
+every node refuses a parameter it does not have: the compensator's choices are ``bringup``'s own
+flags (``--compensator``, ``--model-dir``, ``--feedback``, ``--feedback-gains``), the simulated
+rig's are ``--sim-param`` and ``--plant``.
+
+Before anything starts, ``bringup`` looks for nodes already in its namespace on its ROS domain
+(:data:`catheter_control.local_graph.DISCOVERY_WAIT_S`) and refuses to start a second graph
+beside them (exit code 2, naming them): its lifecycle manager would configure theirs.
+``--domain-id auto`` starts the graph in a domain of its own instead and prints which.
+
+Exit codes: 0 after Ctrl-C (SIGINT) or SIGTERM, the graph stopped in order; 1 when a node
+exited on its own (named); 2 when the graph was refused before it started (a compensator that
+contradicts its model directory, another graph in the namespace) or a node failed its
+start-up (named, with its reason).
 """
 
 from __future__ import annotations
@@ -169,8 +182,14 @@ class EmulatedDevices:
 
     def start(self) -> dict[str, dict[str, object]]:
         """Start the emulator and return its ports (raises RuntimeError if it does not say)."""
+        # Its own session, as the nodes (ProcessGraph.spawn): Ctrl-C goes to the launcher,
+        # which stops the drivers before the devices they talk to.
         self.proc = subprocess.Popen(
-            self.args, stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=self.env
+            self.args,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            env=self.env,
+            start_new_session=True,
         )
         assert self.proc.stdout is not None
         import selectors
@@ -314,6 +333,11 @@ class ProcessGraph:
                     stderr=subprocess.STDOUT if out else None,
                     # The nodes watch this pid and shut down cleanly if it dies (kill -9).
                     env={**self.env, PARENT_PID_ENV: str(os.getpid())},
+                    # Out of the terminal's process group: Ctrl-C reaches the launcher alone,
+                    # which stops the graph in order (compensator ramp-down first, recorder
+                    # last). Signalled with the rest, the rig and the recorder quit while the
+                    # compensator was still ramping down.
+                    start_new_session=True,
                 )
             finally:
                 if out is not None:
@@ -468,6 +492,7 @@ def parse_args(argv: Sequence[str]) -> tuple[argparse.Namespace, list[str]]:
         metavar="NAME=VALUE",
         help="sim_hardware parameter, e.g. effects.pneumatic_lag.enabled=true",
     )
+    add_graph_choices(parser, domain_default="env")
     args = parser.parse_args(own)
     args.namespace = namespace_from_ros_args(ros_args, args.namespace)
     ros_args = [
@@ -480,21 +505,140 @@ def parse_args(argv: Sequence[str]) -> tuple[argparse.Namespace, list[str]]:
             and ros_args[i + 1].startswith("__ns:=")
         )
     ]
+    refuse_node_params(ros_args)
     return args, ros_args
+
+
+OWN_FLAGS = {
+    "compensator": "--compensator",
+    "model_dir": "--model-dir",
+    "feedback": "--feedback",
+    "feedback_gains": "--feedback-gains",
+    "plant": "--plant",
+}
+"""Node parameters a launcher takes as its own flags: given after ``--ros-args`` they would
+reach every node, and each node without them refuses to start."""
+
+
+def refuse_node_params(ros_args: Sequence[str]) -> None:
+    """Refuse ``-p compensator:=...`` (and the like) after ``--ros-args``, naming the flag.
+
+    Raises:
+        SystemExit: 2, with the flag to use (argparse's code for a bad command line).
+    """
+    for flag, value in itertools.pairwise(ros_args):
+        name = value.split(":=", 1)[0]
+        if flag in {"-p", "--param"} and name in OWN_FLAGS:
+            print(
+                f"{sys.argv[0].rsplit('/', 1)[-1]}: -p {value} after --ros-args would reach every "
+                f"node (and the nodes without {name!r} refuse to start): use "
+                f"{OWN_FLAGS[name]} {value.split(':=', 1)[-1]}",
+                file=sys.stderr,
+            )
+            raise SystemExit(2)
+
+
+def add_graph_choices(parser: argparse.ArgumentParser, *, domain_default: str | None) -> None:
+    """The flags ``bringup`` and ``follow_trajectory --sim`` share (controller, plant, domain)."""
+    from catheter_control.graph_domain import domain_id_argument
+    from catheter_control.models import COMPENSATORS, DEFAULT_COMPENSATOR, FEEDBACKS
+
+    parser.add_argument(
+        "--compensator",
+        choices=COMPENSATORS,
+        default=None,
+        help="the compensator the graph hosts (clstm: the shipped c-LSTM; idrdpi: the shipped "
+        "inverse DRDPI; none: static inverse); default: the kind --model-dir holds, else "
+        f"{DEFAULT_COMPENSATOR}",
+    )
+    parser.add_argument(
+        "--model-dir",
+        default="",
+        help="model directory for the compensator ('' = shipped); alone, its manifest says "
+        "which compensator it is",
+    )
+    parser.add_argument(
+        "--feedback",
+        choices=FEEDBACKS,
+        default="none",
+        help="feedback on the measured bend beside the compensator (pi: gains from "
+        "--feedback-gains)",
+    )
+    parser.add_argument(
+        "--feedback-gains",
+        default="",
+        help="feedback.json written by catheter-lab tune ('' = the one in --model-dir, or the "
+        "shipped one, tuned on the simulated rig)",
+    )
+    parser.add_argument(
+        "--plant",
+        default="",
+        metavar="MODULE:FACTORY",
+        help="a simulated catheter of your own behind the rig (docs/simulated_rig.md)",
+    )
+    parser.add_argument(
+        "--domain-id",
+        type=domain_id_argument,
+        default=domain_default,
+        metavar="auto|env|N",
+        help="ROS domain of the graph: auto = one where nobody is (printed), env = "
+        "ROS_DOMAIN_ID as set, N = that one"
+        + (f" (default: {domain_default})" if domain_default else ""),
+    )
+
+
+def compensator_choice(args: argparse.Namespace) -> dict[str, object]:
+    """The compensator's parameters from the command line, its kind checked against the model.
+
+    The kind is passed only when given or read from ``--model-dir`` (the node's default is
+    the same ``clstm``).
+
+    Raises:
+        CatheterError: the compensator and the model directory disagree, or the directory is
+            not a compensator's (both named).
+    """
+    from catheter_control.models import resolve_compensator
+
+    params: dict[str, object] = {}
+    if args.compensator is not None or args.model_dir:
+        params["compensator"] = resolve_compensator(args.compensator, args.model_dir)
+    if args.model_dir:
+        params["model_dir"] = str(args.model_dir)
+    if args.feedback != "none":
+        params["feedback"] = args.feedback
+    if args.feedback_gains:
+        params["feedback_gains"] = str(args.feedback_gains)
+    return params
 
 
 def main(argv: list[str] | None = None) -> None:
     """Entry point of ``ros2 run catheter_control bringup``."""
     args, ros_args = parse_args(sys.argv[1:] if argv is None else argv)
+    from catheter_control.graph_domain import choose_domain
+
+    # SIGTERM (a supervisor, docker stop) stops the graph in order, as Ctrl-C does.
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
     sim_params: dict[str, object] = {}
     for item in args.sim_param:
         key, _, raw = item.partition("=")
         sim_params[key] = json.loads(raw) if raw not in {"true", "false"} else raw == "true"
+    if args.plant:
+        sim_params["plant"] = args.plant
+    try:
+        compensator_params = {**SIM_COMPENSATOR_PARAMS, **compensator_choice(args)}
+        # Refused before anything starts: a second graph's manager would configure the
+        # first one's nodes, and its compensator take the same trajectories.
+        choose_domain(args.domain_id, args.namespace, "bringup")
+    except CatheterError as exc:
+        print(f"bringup: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None
+    except KeyboardInterrupt:
+        return  # Ctrl-C during the look: nothing started
     specs = sim_graph_specs(
         args.bag,
         {"source": "bringup"},
         sim_params,
-        SIM_COMPENSATOR_PARAMS,
+        compensator_params,
         with_compensator=not args.no_compensator,
         with_tf=not args.no_tf,
     )
@@ -510,15 +654,24 @@ def main(argv: list[str] | None = None) -> None:
         print(f"bringup: {exc}", file=sys.stderr)
         raise SystemExit(2) from None
     except KeyboardInterrupt:
-        return  # Ctrl-C while the nodes came up: start() has stopped them already
+        print("bringup: interrupted while the graph came up; stopped it", file=sys.stderr)
+        return  # start() has stopped the nodes already
+    print(f"bringup: graph up in {args.namespace}; Ctrl-C stops it (compensator ramped down first)")
+    code = 0
     try:
         while not graph.failed():
             time.sleep(0.2)
         print(f"bringup: a node exited: {graph.failed()}", file=sys.stderr)
+        code = 1
     except KeyboardInterrupt:
-        pass
+        print("bringup: stopping (the compensator ramps down first)", file=sys.stderr)
     finally:
+        # A second Ctrl-C must not cut the ordered stop short (or end in a traceback).
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
         graph.stop()
+    if code:
+        raise SystemExit(code)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,143 @@
+"""Which ROS domain a launcher starts its graph in, and whether another graph is there already.
+
+Two graphs in one namespace and domain configure and activate each other's lifecycle nodes,
+and each compensator takes the other's trajectories: both runs fail, with messages that blame
+the watchdog or a missing tip angle, and a simulated run could command a rig's compensator.
+So ``bringup`` and ``follow_trajectory --sim`` / ``--emulated-rig`` look before they start
+(:func:`choose_domain`), and refuse a namespace where nodes already run, naming them and the
+domain; or they take a domain of their own (``--domain-id auto``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import random
+import time
+from collections.abc import Sequence
+
+from catheter_models.errors import CatheterError
+
+
+class GraphConflictError(CatheterError):
+    """Another graph already runs in the namespace and domain a new one would start in."""
+
+
+DISCOVERY_WAIT_S = 1.5
+"""How long a look for nodes already in a domain lasts before a graph is started there. A new
+DDS participant announces itself at once and the others answer it, and the node names follow
+on ``ros_discovery_info`` (transient local): on one host that takes well under half a second,
+so 1.5 s covers a busy host with room to spare, while every start pays it once. A look that
+ends too soon lets two graphs configure each other's nodes; it cannot stop a graph started
+later, which makes its own look."""
+
+AUTO_DOMAIN_RANGE = (1, 99)
+"""Where ``--domain-id auto`` looks for a domain: not 0 (every ROS tool's and rig's default),
+and below the integration tests' 100-230, within the ids ROS 2 documents as safe on Linux (their
+ports stay below the ephemeral range)."""
+
+_AUTO_TRIES = 5
+
+
+def domain_id_argument(value: str) -> str:
+    """``--domain-id``: ``auto``, ``env`` (ROS_DOMAIN_ID as it is) or a number 0-232."""
+    if value in {"auto", "env"} or (value.isdigit() and 0 <= int(value) <= 232):
+        return value
+    raise argparse.ArgumentTypeError(
+        f"{value!r}: give auto (a domain with nobody in it), env (ROS_DOMAIN_ID as set) or 0-232"
+    )
+
+
+def nodes_in_domain(domain_id: int, wait_s: float = DISCOVERY_WAIT_S) -> list[str]:
+    """Full names of the nodes seen in ``domain_id`` over ``wait_s`` (this probe left out).
+
+    Discovery follows ``ROS_AUTOMATIC_DISCOVERY_RANGE`` as this process has it, so the probe
+    sees what a graph started from here would reach.
+    """
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.signals import SignalHandlerOptions
+
+    probe = f"_catheter_graph_probe_{os.getpid()}"
+    context = Context()
+    rclpy.init(
+        args=["graph_probe"],  # not sys.argv: the tool's own ROS arguments are its node's
+        context=context,
+        domain_id=domain_id,
+        signal_handler_options=SignalHandlerOptions.NO,
+    )
+    try:
+        node = Node(probe, context=context, enable_rosout=False)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        # The whole window, always: a node found late is still a node.
+        end_s = time.monotonic() + wait_s
+        while time.monotonic() < end_s:
+            executor.spin_once(timeout_sec=0.1)
+        found = sorted(
+            f"{ns.rstrip('/')}/{name}"
+            for name, ns in node.get_node_names_and_namespaces()
+            if name != probe
+        )
+        executor.remove_node(node)
+        node.destroy_node()
+    finally:
+        context.try_shutdown()
+    return found
+
+
+def in_namespace(nodes: Sequence[str], namespace: str) -> list[str]:
+    """The nodes of ``nodes`` (full names) that live in ``namespace`` or below it."""
+    ns = namespace.rstrip("/")
+    return [n for n in nodes if n.rsplit("/", 1)[0] == ns or n.startswith(f"{ns}/")]
+
+
+def current_domain_id() -> int:
+    """ROS_DOMAIN_ID as this process has it (0, ROS's default, when unset or empty)."""
+    value = os.environ.get("ROS_DOMAIN_ID", "")
+    return int(value) if value.isdigit() else 0
+
+
+def choose_domain(choice: str, namespace: str, who: str) -> int:
+    """Set ROS_DOMAIN_ID for what this process starts, after checking no graph runs there.
+
+    ``choice`` is ``--domain-id``: ``env`` keeps ROS_DOMAIN_ID (0 if unset); a number takes
+    that domain; ``auto`` takes a domain in :data:`AUTO_DOMAIN_RANGE` where no node is seen.
+    The domain is printed, so a person can attach tools to it.
+
+    Raises:
+        GraphConflictError: nodes run in ``namespace`` in the chosen domain (named, with the
+            domain), or ``auto`` found no empty domain in :data:`_AUTO_TRIES` tries.
+    """
+    if choice == "auto":
+        low, high = AUTO_DOMAIN_RANGE
+        busy: dict[int, int] = {}
+        for domain_id in random.sample(range(low, high + 1), _AUTO_TRIES):
+            seen = nodes_in_domain(domain_id)
+            if not seen:
+                os.environ["ROS_DOMAIN_ID"] = str(domain_id)
+                print(
+                    f"{who}: ROS_DOMAIN_ID={domain_id} (a domain of its own: nobody else was "
+                    f"there); attach tools with ROS_DOMAIN_ID={domain_id}"
+                )
+                return domain_id
+            busy[domain_id] = len(seen)
+        raise GraphConflictError(
+            "no empty ROS domain found for --domain-id auto: "
+            + ", ".join(f"{d} ({n} nodes)" for d, n in busy.items())
+            + "; give one with --domain-id N"
+        )
+    if choice != "env":
+        os.environ["ROS_DOMAIN_ID"] = choice
+    domain_id = current_domain_id()
+    others = in_namespace(nodes_in_domain(domain_id), namespace)
+    if others:
+        raise GraphConflictError(
+            f"another graph already runs in {namespace} on ROS_DOMAIN_ID={domain_id}: "
+            f"{', '.join(others)}; a second one would configure and command its nodes. Stop "
+            "it, or start this one elsewhere (--domain-id auto, or --namespace)"
+        )
+    print(f"{who}: ROS_DOMAIN_ID={domain_id}")
+    return domain_id
