@@ -23,15 +23,26 @@ from __future__ import annotations
 
 import argparse
 import datetime as dt
+import signal
 import sys
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from catheter_control.bringup import namespace_from_ros_args, split_ros_args
+from catheter_control.bringup import (
+    add_graph_choices,
+    namespace_from_ros_args,
+    refuse_node_params,
+    split_ros_args,
+)
 from catheter_control.live_view import LiveViewProcess, parse_port
-from catheter_control.local_graph import LocalGraph, LocalGraphError, start_local_graph
-from catheter_control.models import COMPENSATORS, DEFAULT_COMPENSATOR, FEEDBACKS
+from catheter_control.local_graph import (
+    LocalGraph,
+    LocalGraphError,
+    prepare_local_graph,
+    start_local_graph,
+)
 from catheter_control.trajectory import (
     TrajectoryLimits,
     TrajectoryPlan,
@@ -47,12 +58,22 @@ if TYPE_CHECKING:
     from catheter_control.tracking_report import RunRecord
 
 EXIT_REFUSED = 2
-"""The trajectory was refused: by this tool's checks, or by the compensator."""
+"""Refused before anything moved: the trajectory (by this tool's checks, or by the
+compensator), a compensator that contradicts its model directory or a model directory that is
+not a compensator's, or (``--sim``/``--emulated-rig``) a namespace and domain where another
+graph already runs."""
 EXIT_GRAPH = 3
 """The graph did not come up, or never started the trajectory."""
 EXIT_STOPPED = 4
 """The compensator stopped the run part-way (a stale sensor, a failed model): it ramped the
 pressure down and said why; the partial run is still reported."""
+EXIT_INTERRUPTED = 130
+"""A person interrupted the run (Ctrl-C, SIGINT; SIGTERM alike): the goal was cancelled and a
+started graph stopped (the compensator ramps down), and the partial run is reported when there
+is anything to score. Not EXIT_STOPPED: that says the rig or the model failed, which a script
+(commission) acts on; an interrupt says nothing about the rig. 130 is what shells report for a
+command that SIGINT ended (128 + 2), so a script that runs this tool sees what it would see for
+any other command a person interrupted."""
 
 
 @dataclass(frozen=True)
@@ -84,29 +105,9 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
         action="store_true",
         help="bring up emulated devices and the real valve_driver and laser_angle first",
     )
-    parser.add_argument(
-        "--compensator",
-        choices=COMPENSATORS,
-        default=DEFAULT_COMPENSATOR,
-        help="with --sim/--emulated-rig: the compensator the started graph hosts "
-        "(clstm: the shipped c-LSTM; idrdpi: the shipped inverse DRDPI; none: static inverse)",
-    )
-    parser.add_argument(
-        "--model-dir", default="", help="model directory for the compensator ('' = shipped)"
-    )
-    parser.add_argument(
-        "--feedback",
-        choices=FEEDBACKS,
-        default="none",
-        help="with --sim/--emulated-rig: feedback on the measured bend beside the compensator "
-        "(pi: gains from --feedback-gains)",
-    )
-    parser.add_argument(
-        "--feedback-gains",
-        default="",
-        help="feedback.json written by catheter-lab tune ('' = the one in --model-dir, or the "
-        "shipped one, tuned on the simulated rig)",
-    )
+    # With --sim/--emulated-rig: what the started graph runs, and in which ROS domain
+    # (default: ROS_DOMAIN_ID if set, else auto; see local_graph.prepare_local_graph).
+    add_graph_choices(parser, domain_default=None)
     parser.add_argument("--out", type=Path, help="run directory (default runs/<time>-<name>)")
     parser.add_argument("--namespace", default=DEFAULT_NAMESPACE)
     parser.add_argument("--control-rate-hz", type=float, default=CONTROL_RATE_HZ)
@@ -144,6 +145,7 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
     args = parser.parse_args(own)
     args.namespace = namespace_from_ros_args(ros_args, args.namespace)
     args.ros_args = ros_args
+    refuse_node_params(ros_args)
     return args
 
 
@@ -163,12 +165,41 @@ def main(argv: list[str] | None = None) -> int:
     local = None
     if bag_path is not None:
         try:
+            prepare_local_graph(args)
+        except CatheterError as exc:
+            print(f"follow_trajectory: {exc}", file=sys.stderr)
+            return EXIT_REFUSED
+        except KeyboardInterrupt:
+            print("follow_trajectory: interrupted before anything started", file=sys.stderr)
+            return EXIT_INTERRUPTED
+        try:
             local = start_local_graph(
                 args, run_dir, bag_path, trajectory.name, trajectory.signal_params
             )
         except LocalGraphError as exc:
             print(f"follow_trajectory: {exc}", file=sys.stderr)
             return EXIT_GRAPH
+        except KeyboardInterrupt:
+            # ProcessGraph.start stopped what it had started (the compensator first).
+            print(
+                "follow_trajectory: interrupted while the graph came up; it is stopped, "
+                "nothing ran",
+                file=sys.stderr,
+            )
+            return EXIT_INTERRUPTED
+    # From here a SIGINT (or SIGTERM) is a request: the run cancels its goal, the graph stops
+    # in order and what ran is reported. As KeyboardInterrupt it tore through rclpy's spin
+    # and lost the run.
+    interrupt = threading.Event()
+    previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+
+    def on_signal(_signum: int, _frame: object) -> None:
+        if interrupt.is_set():
+            print("follow_trajectory: stopping, please wait", file=sys.stderr)
+        interrupt.set()
+
+    for sig in previous:
+        signal.signal(sig, on_signal)
     live = None
     try:
         if args.live is not None:
@@ -178,7 +209,7 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"follow_trajectory: {exc}", file=sys.stderr)
                 return EXIT_GRAPH
             print(f"follow_trajectory: live view: Foxglove -> Open connection -> {live.url}")
-        return _run(args, trajectory, run_dir, bag_path, local)
+        return _run(args, trajectory, run_dir, bag_path, local, interrupt=interrupt)
     finally:
         if live is not None:
             print(live.stop())
@@ -186,6 +217,8 @@ def main(argv: list[str] | None = None) -> int:
             local.stop()
         if bag_path is not None and bag_path.exists():
             print(f"Bag: {bag_path}")
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
 
 
 def _load(args: argparse.Namespace) -> _Trajectory:
@@ -215,11 +248,18 @@ def _run(
     run_dir: Path,
     bag_path: Path | None,
     local: LocalGraph | None,
+    *,
+    interrupt: threading.Event,
 ) -> int:
     """Follow the trajectory, then score and report it; the exit code."""
     # Imported here, not at the top: the run loads the report's matplotlib (about 2 s),
     # which a refused trajectory, or a local graph that fails to start, should not wait for.
-    from catheter_control.trajectory_client import GoalRefusedError, GraphNotReadyError, follow
+    from catheter_control.trajectory_client import (
+        GoalRefusedError,
+        GraphNotReadyError,
+        RunInterruptedError,
+        follow,
+    )
 
     try:
         record = follow(
@@ -231,7 +271,11 @@ def _run(
             wait_for_recorder=bag_path is not None,
             show_progress=not args.no_progress,
             lead_s=trajectory.lead_s,
+            interrupt=interrupt,
         )
+    except RunInterruptedError as exc:
+        print(f"follow_trajectory: {exc}", file=sys.stderr)
+        return EXIT_INTERRUPTED
     except GoalRefusedError as exc:
         print(f"follow_trajectory: {exc}", file=sys.stderr)
         return EXIT_REFUSED
@@ -252,6 +296,9 @@ def _report(
         result = report.score_record(record, plan.duration_s, lead_s)
     except report.TrackingError as exc:
         print(f"follow_trajectory: cannot score the run: {exc}", file=sys.stderr)
+        if record.interrupted:
+            print(f"follow_trajectory: {record.interrupted}", file=sys.stderr)
+            return EXIT_INTERRUPTED
         return EXIT_STOPPED if record.stopped else EXIT_GRAPH
     print(result.text(plan.name))
     summary = report.RunSummary.of(record)
@@ -270,6 +317,9 @@ def _report(
     report.save_json(result, run_dir / "report.json", facts)
     print(f"Plot: {plot}")
     print(f"Report: {run_dir / 'report.json'}")
+    if record.interrupted:
+        print(f"follow_trajectory: {record.interrupted} (scored up to there)", file=sys.stderr)
+        return EXIT_INTERRUPTED
     if record.stopped:
         print(
             f"follow_trajectory: the run stopped part-way: {record.stopped} (scored up to there)",

@@ -22,7 +22,8 @@ from catheter_control.bringup import (
     driver_specs,
     sim_graph_specs,
 )
-from catheter_control.models import SHIPPED
+from catheter_control.graph_domain import choose_domain
+from catheter_control.models import SHIPPED, resolve_compensator
 from catheter_models.errors import CatheterError
 from catheter_models.geometry import Calibration
 from catheter_models.plant import PlantConfig
@@ -49,6 +50,26 @@ class LocalGraph:
             self.devices.stop()
 
 
+def prepare_local_graph(args: argparse.Namespace) -> None:
+    """Before anything starts: this host only, the compensator settled, the domain checked.
+
+    ``args.compensator`` becomes the kind the graph runs (``--model-dir``'s manifest's, when
+    no ``--compensator`` was given). ``--domain-id`` left out takes ROS_DOMAIN_ID when it is
+    set (a person chose it; the integration tests give each test its own), and a domain of
+    its own (``auto``) when it is not: unset means domain 0, every rig's and every ROS tool's
+    default, and a simulated run must never reach a rig.
+
+    Raises:
+        CatheterError: the compensator and the model directory disagree, the directory is
+            not a compensator's, or another graph runs in the namespace and domain.
+    """
+    # A local graph must never reach a real rig on the network.
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    args.compensator = resolve_compensator(args.compensator, args.model_dir)
+    choice = args.domain_id or ("env" if os.environ.get("ROS_DOMAIN_ID") else "auto")
+    choose_domain(choice, args.namespace, "follow_trajectory")
+
+
 def start_local_graph(
     args: argparse.Namespace,
     run_dir: Path,
@@ -69,7 +90,8 @@ def start_local_graph(
     Raises:
         LocalGraphError: the devices or a node failed to start (the message says which).
     """
-    # A local graph must never reach a real rig on the network.
+    # A local graph must never reach a real rig on the network (prepare_local_graph set it
+    # already; a caller that skipped it still gets it).
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     hardware = (
         "simulated thesis rig (catheter_driver sim_hardware)"
@@ -85,11 +107,13 @@ def start_local_graph(
         "model_dir": args.model_dir or f"shipped ({SHIPPED[args.compensator]})",
         "feedback": args.feedback,
         "feedback_gains": args.feedback_gains or "beside the model (or shipped)",
+        "plant": args.plant or "shipped",
     }
     run_dir.mkdir(parents=True, exist_ok=True)
     specs = sim_graph_specs(
         bag_path,
         custom,
+        {"plant": args.plant} if args.plant else None,
         compensator_params={
             "control_rate_hz": args.control_rate_hz,
             "compensator": args.compensator,
@@ -102,11 +126,14 @@ def start_local_graph(
     )
     devices = None
     if args.emulated_rig:
-        devices = EmulatedDevices()
+        devices = EmulatedDevices(extra_args=["--plant", args.plant] if args.plant else ())
         try:
             ports = devices.start()
         except RuntimeError as exc:
             raise LocalGraphError(str(exc)) from exc
+        except KeyboardInterrupt:
+            devices.stop()
+            raise
         # The emulated laser is taken as zeroed at the plant's straight-tip distance,
         # as ~/zero would measure it with the muscle vented.
         calibration = run_dir / "laser_calibration.json"
@@ -123,10 +150,12 @@ def start_local_graph(
     print(f"follow_trajectory: starting the {what} (logs in {run_dir / 'logs'})")
     try:
         graph.start()
-    except CatheterError as exc:  # a node failed configure/activate, or exited
+    except BaseException as exc:  # a node failed configure/activate or exited, or Ctrl-C
         # The graph stopped its own nodes; the emulated devices go too. Left running, the
         # rig process outlived follow_trajectory and held its output pipe open.
         if devices is not None:
             devices.stop()
-        raise LocalGraphError(str(exc)) from exc
+        if isinstance(exc, CatheterError):
+            raise LocalGraphError(str(exc)) from exc
+        raise
     return LocalGraph(graph, devices)

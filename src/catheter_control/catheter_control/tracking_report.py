@@ -300,6 +300,11 @@ class Series:
         self.t_s = array("d")
         self.values = array("d")
 
+    def truncate(self, count: int) -> None:
+        """Keep the first ``count`` samples only."""
+        del self.t_s[count:]
+        del self.values[count:]
+
     def __len__(self) -> int:
         return len(self.t_s)
 
@@ -316,6 +321,8 @@ class RunRecord:
     measured: Series = field(default_factory=Series)
     stopped: str = ""
     """Why the compensator stopped part-way ('' if the run went to its end)."""
+    interrupted: str = ""
+    """When a person interrupted the run (Ctrl-C), and what was done ('' if nobody did)."""
     recorder: Report = field(default_factory=dict)
     """The recorder's newest report."""
     compensator: list[tuple[float, Report]] = field(default_factory=list)
@@ -364,7 +371,13 @@ class RunSummary:
 
 
 def score_record(record: RunRecord, duration_s: float, lead_s: float) -> TrackingResult:
-    """Score the run from its first set-point, leaving out the lead-in (``lead_s``)."""
+    """Score the run from its first set-point, leaving out the lead-in (``lead_s``).
+
+    Raises:
+        TrackingError: nothing to score (no set-point, or too few measurements in the window).
+    """
+    if not record.desired:
+        raise TrackingError("no set-point was received; nothing to score")
     start = record.desired.t_s[0]
     return score_run(
         record.desired.t_s,
@@ -434,6 +447,8 @@ def run_facts(
         "bag": str(bag_path or ""),
         # Why the compensator stopped part-way ('' if the run went to its end).
         "stopped": record.stopped,
+        # When a person interrupted it (Ctrl-C): the score covers the run up to there.
+        "interrupted": record.interrupted,
         "lead_in_s": lead_s,
         "controller": summary.controller,
         "timing": summary.timing,

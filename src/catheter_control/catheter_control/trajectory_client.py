@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import sys
+import threading
 import time
 from collections.abc import Sequence
 from typing import Any
@@ -24,6 +25,7 @@ from control_msgs.action import FollowJointTrajectory
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.action.client import ActionClient, ClientGoalHandle
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectoryPoint
@@ -60,8 +62,17 @@ class GraphNotReadyError(CatheterError):
     """The graph did not come up, or the compensator never started the trajectory."""
 
 
+_CANCEL_WAIT_S = 3.0
+"""How long an interrupted run waits for the compensator to answer its cancel and ramp down
+(at the slew limit the highest command takes 0.6 s); the set-points of the ramp are kept."""
+
+
 class GoalRefusedError(CatheterError):
     """The compensator refused the trajectory (its reason), before a set-point went out."""
+
+
+class RunInterruptedError(CatheterError):
+    """A person interrupted (Ctrl-C) before the trajectory was sent: nothing ran."""
 
 
 def follow(
@@ -74,6 +85,7 @@ def follow(
     wait_for_recorder: bool,
     show_progress: bool,
     lead_s: float,
+    interrupt: threading.Event | None = None,
 ) -> RunRecord:
     """Run ``plan`` on the graph in ``namespace`` and return everything heard.
 
@@ -87,24 +99,34 @@ def follow(
         wait_for_recorder: A bag is recorded: wait until the recorder hears every stream.
         show_progress: Show a progress bar (on a terminal).
         lead_s: The unscored lead-in at the start of ``plan`` [s] (0: none).
+        interrupt: Set (by the caller's SIGINT handler) when a person interrupts: before the
+            goal is sent the run ends with :class:`RunInterruptedError`; after, the goal is
+            cancelled (the compensator ramps down), the ramp is recorded and the partial
+            record returned with ``interrupted`` saying when.
 
     Raises:
         GraphNotReadyError: the graph did not come up within ``timeout_s``, a started node
             exited, or the compensator sent no set-points.
         GoalRefusedError: the compensator refused the trajectory.
+        RunInterruptedError: interrupted before the goal was sent.
     """
     record = RunRecord()
+    interrupt = interrupt or threading.Event()
     with rclpy.init(
-        args=["follow_trajectory", "--ros-args", "-r", f"__ns:={namespace}", *ros_args]
+        args=["follow_trajectory", "--ros-args", "-r", f"__ns:={namespace}", *ros_args],
+        # The caller's handler turns SIGINT into ``interrupt``: rclpy's would raise
+        # KeyboardInterrupt wherever the run was, and the partial run would be lost.
+        signal_handler_options=SignalHandlerOptions.NO,
     ):
-        client = _Client(Node("follow_trajectory"), record, timeout_s)
+        client = _Client(Node("follow_trajectory"), record, timeout_s, interrupt)
         client.wait_for_graph(graph)
         if wait_for_recorder:
             client.wait_for_recorder()
         client.run(plan, show_progress=show_progress, lead_s=lead_s)
         if record.stopped:
             print(f"follow_trajectory: compensator: {record.stopped}", file=sys.stderr)
-        client.wait_for_last_reports()
+        if not record.interrupted:
+            client.wait_for_last_reports()
         client.node.destroy_node()
     return record
 
@@ -117,11 +139,15 @@ class _Client:
         record: Where what is heard goes.
         timeout_s: How long the graph (and the recorder) may take to be ready; the clock
             starts now.
+        interrupt: Set when a person interrupts the run.
     """
 
-    def __init__(self, node: Node, record: RunRecord, timeout_s: float) -> None:
+    def __init__(
+        self, node: Node, record: RunRecord, timeout_s: float, interrupt: threading.Event
+    ) -> None:
         self.node = node
         self.record = record
+        self.interrupt = interrupt
 
         def on_desired(msg: JointState) -> None:
             record.desired.append(ns_from_time(msg.header.stamp) * 1e-9, angle_rad_from(msg))
@@ -158,6 +184,7 @@ class _Client:
         node, record = self.node, self.record
         while time.monotonic() < self.deadline:
             rclpy.spin_once(node, timeout_sec=0.1)
+            self._check_interrupt("while waiting for the graph")
             if graph is not None and (dead := graph.failed()):
                 for n in dead:
                     print(f"--- {n} log ---\n{graph.log_tail(n)}", file=sys.stderr)
@@ -191,12 +218,43 @@ class _Client:
 
         while unheard() and time.monotonic() < self.deadline:
             rclpy.spin_once(self.node, timeout_sec=0.05)
+            self._check_interrupt("while waiting for the recorder")
         if unheard():
             raise GraphNotReadyError(
                 "the recorder hears no publisher on "
                 + ", ".join(unheard())
                 + f" after {self.timeout_s:g} s"
             )
+
+    def _check_interrupt(self, when: str) -> None:
+        if self.interrupt.is_set():
+            raise RunInterruptedError(f"interrupted {when}; no trajectory was sent")
+
+    def _cancel(
+        self,
+        sending: Future[ClientGoalHandle[Any, Any, Any]],
+        result_future: Future[Any] | None,
+    ) -> str:
+        """Cancel the goal (the compensator ramps down) and record the ramp; what happened.
+
+        The spin goes on until the goal's result comes (the ramp is done) or
+        :data:`_CANCEL_WAIT_S`; a local graph is ramped down by its stop in any case.
+        """
+        until = time.monotonic() + _CANCEL_WAIT_S
+        while not sending.done() and time.monotonic() < until:
+            rclpy.spin_once(self.node, timeout_sec=0.05)
+        handle = sending.result() if sending.done() else None
+        if handle is None or not handle.accepted:
+            return "the goal was not accepted yet, nothing to cancel"
+        if result_future is None:
+            result_future = handle.get_result_async()
+        if not result_future.done():
+            handle.cancel_goal_async()
+        while not result_future.done() and time.monotonic() < until:
+            rclpy.spin_once(self.node, timeout_sec=0.05)
+        if result_future.done():
+            return "goal cancelled, the compensator ramped down"
+        return f"goal cancelled, no result within {_CANCEL_WAIT_S:g} s"
 
     def run(self, plan: TrajectoryPlan, *, show_progress: bool, lead_s: float) -> None:
         """Send the goal and spin through the trajectory and the ramp-down after it."""
@@ -278,6 +336,20 @@ class _Client:
                 bar.close()
                 raise GoalRefusedError(f"the compensator refused the trajectory: {refusal}")
             if record.stopped:
+                break
+            if self.interrupt.is_set():
+                bar.close()
+                when = (
+                    "before the first set-point"
+                    if record.started_at_s is None
+                    else f"{plan_time_s[0]:.1f} s into the trajectory"
+                )
+                heard = len(record.desired)
+                done = self._cancel(sending, result_future)
+                # Scored up to the interrupt: the ramp-down after it is no tracking (it is
+                # in the bag).
+                record.desired.truncate(heard)
+                record.interrupted = f"interrupted (SIGINT) {when}: {done}"
                 break
             if record.started_at_s is None and now - record.sent_at_s > _START_TIMEOUT_S:
                 bar.close()
