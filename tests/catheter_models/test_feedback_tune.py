@@ -17,7 +17,7 @@ from scipy import signal
 from catheter_models.cli import main as lab_main
 from catheter_models.errors import SignalError
 from catheter_models.feedback import ClosedLoop, FeedbackGains
-from catheter_models.feedback.tune import design, identify, margins
+from catheter_models.feedback.tune import MAX_STALL_S, design, find_steps, identify, margins
 from catheter_models.lab.signals import lab_spec
 from catheter_models.models.base import Recording
 from catheter_models.signals import get_preset
@@ -120,6 +120,32 @@ def test_the_designed_loop_keeps_its_promise_on_the_plant(
     bend = np.degrees(np.asarray(out))
     assert abs(bend[-round(RATE_HZ) :] - 10.0).max() < 0.05
     assert bend.max() < 10.0 * 1.5
+
+
+def test_a_command_lost_inside_a_ramp_does_not_lose_the_step() -> None:
+    """A live recording misses a command now and then; the grid holds the one before over it.
+
+    Each stall inside a ramp (the held-over sample) must not cut the ramp in two: the steps
+    found are those of the intact recording, each one lasting as long.
+    """
+    rec = LinearPlant(tau_s=0.05, delay_s=0.02).record()
+    intact = find_steps(rec)
+    p = np.asarray(rec.pressure_pa).copy()
+    moving = np.flatnonzero(np.abs(np.diff(p)) > 0.0) + 1
+    ramps = [w.start + 1 for w in intact]  # the second sample of every step's ramp
+    assert all(i in set(moving) for i in ramps)
+    stall = round(MAX_STALL_S * RATE_HZ)
+    for i in ramps:
+        p[i : i + stall] = p[i - 1]  # held over the lost samples
+    holed = find_steps(Recording(rec.name, RATE_HZ, p, rec.angle_rad))
+    assert [(w.start, w.stop, w.continues) for w in holed] == [
+        (w.start, w.stop, w.continues) for w in intact
+    ]
+    # A longer standstill is a plateau, not a stall: that ramp ends there, as before.
+    p = np.asarray(rec.pressure_pa).copy()
+    p[ramps[0] : ramps[0] + stall + 1] = p[ramps[0] - 1]
+    cut = find_steps(Recording(rec.name, RATE_HZ, p, rec.angle_rad))
+    assert intact[0].start not in [w.start for w in cut]
 
 
 def test_a_recording_without_steps_is_refused_with_what_to_record() -> None:

@@ -51,6 +51,10 @@ MOVING_PA_PER_S = 0.5e5
 """A command changing faster than this is moving [Pa/s]."""
 MIN_STEPS = 3
 """Fewest steps a fit is made from."""
+MAX_STALL_S = 0.02
+"""A command that stands still for at most this long between two moves the same way is still
+moving [s]: a command lost in a live recording (held over on the grid, as the valve held it)
+or a tick the sender skipped would otherwise cut a step's ramp in two and lose the step."""
 GAIN_PERCENTILE = 90.0
 """The loop is designed for this percentile of the steps' gains (the stiff end)."""
 RESONANCE_GAIN = 0.9
@@ -148,7 +152,8 @@ def find_steps(recording: Recording) -> list[StepWindow]:
     p = np.asarray(recording.pressure_pa, dtype=float)
     y = np.asarray(recording.angle_rad, dtype=float)
     rate = recording.rate_hz
-    moving = np.abs(np.diff(p, prepend=p[0])) > MOVING_PA_PER_S / rate
+    delta = np.diff(p, prepend=p[0])
+    moving = _bridge_stalls(np.abs(delta) > MOVING_PA_PER_S / rate, delta, rate)
     edges = np.flatnonzero(np.diff(moving.astype(np.int8)))
     starts = [int(e) + 1 for e in edges if moving[e + 1]]
     if moving[0]:
@@ -181,6 +186,22 @@ def find_steps(recording: Recording) -> list[StepWindow]:
             StepWindow(start, stop, before, float(np.mean(y[start - n_base : start])), continues)
         )
     return found
+
+
+def _bridge_stalls(
+    moving: npt.NDArray[np.bool_], delta: FloatArray, rate_hz: float
+) -> npt.NDArray[np.bool_]:
+    """``moving`` with each stall of at most :data:`MAX_STALL_S` inside a one-way move filled."""
+    out = moving.copy()
+    longest = max(1, round(MAX_STALL_S * rate_hz))
+    still = np.flatnonzero(np.diff(moving.astype(np.int8)) == -1) + 1  # first still samples
+    for first in still:
+        last = first
+        while last < moving.size and not moving[last]:
+            last += 1
+        if last < moving.size and last - first <= longest and delta[first - 1] * delta[last] > 0:
+            out[first:last] = True
+    return out
 
 
 def _shape_response(theta: FloatArray, u: FloatArray, dt_s: float, resonance: bool) -> FloatArray:
