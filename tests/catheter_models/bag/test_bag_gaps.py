@@ -45,3 +45,9 @@ def test_training_data_says_where_it_interpolates(tmp_path: Path) -> None:
             f"{topic} lacks 22 samples in 1 gap(s)" in m and "after t = 3.996 s" in m for m in said
         ), said
     assert recording.pressure_pa.size == 2500  # the grid spans the hole, as it says
+    # How it spans it: the command held from before the hole, the bend interpolated.
+    assert any(m.startswith(f"{tmp_path / 'holed'}: pressure/command") for m in said), said
+    for m in said:
+        fill = "holds the last command over it" if ": pressure/command" in m else "interpolates"
+        assert fill in m, m
+    np.testing.assert_array_equal(recording.pressure_pa[1000:1022], recording.pressure_pa[999])

@@ -60,12 +60,17 @@ def recording_from_bag(path: Path | str, rate_hz: float = SENSOR_RATE_HZ) -> Rec
             f"{path} does not fit the models' signals (input {PRESSURE_COMMAND.name}, "
             f"output {TIP_ANGLE.name}): {exc}"
         ) from None
-    # The uniform grid interpolates across a gap: say so, naming where, so nobody trains on
-    # made-up samples without knowing.
+    # The uniform grid is not cut at a gap: it holds the command from before it (as the valve
+    # held it) and interpolates a measurement across it. Say so, naming where, so nobody
+    # trains on made-up samples without knowing.
     for line in data.gap_report():
+        fill = (
+            "holds the last command over it"
+            if line.startswith(PRESSURE_COMMAND.name + " ")
+            else "interpolates across it"
+        )
         warnings.warn(
-            BagGapWarning(f"{path}: {line}; the {rate_hz:g} Hz grid interpolates across it"),
-            stacklevel=2,
+            BagGapWarning(f"{path}: {line}; the {rate_hz:g} Hz grid {fill}"), stacklevel=2
         )
     aligned = data.aligned(rate_hz=rate_hz)
     if len(aligned) < 2:
