@@ -616,8 +616,6 @@ def main(argv: list[str] | None = None) -> None:
     args, ros_args = parse_args(sys.argv[1:] if argv is None else argv)
     from catheter_control.graph_domain import choose_domain
 
-    # SIGTERM (a supervisor, docker stop) stops the graph in order, as Ctrl-C does.
-    signal.signal(signal.SIGTERM, signal.default_int_handler)
     sim_params: dict[str, object] = {}
     for item in args.sim_param:
         key, _, raw = item.partition("=")
@@ -647,6 +645,8 @@ def main(argv: list[str] | None = None) -> None:
         if code:
             raise SystemExit(code)
         return
+    # SIGTERM (a supervisor, docker stop) stops the graph in order, as Ctrl-C does.
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
     graph = ProcessGraph(specs, args.namespace, ros_args=ros_args)
     try:
         graph.start()

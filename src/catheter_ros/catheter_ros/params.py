@@ -62,9 +62,9 @@ def declare_plain(node: Node, name: str, default: Any, doc: str, read_only: bool
 
 
 _TYPE_NAMES = {
-    Parameter.Type.BOOL: "a bool (true/false)",
+    Parameter.Type.BOOL: "a bool",
     Parameter.Type.INTEGER: "an integer",
-    Parameter.Type.DOUBLE: "a double (a number)",
+    Parameter.Type.DOUBLE: "a double",
     Parameter.Type.STRING: "a string",
 }
 
