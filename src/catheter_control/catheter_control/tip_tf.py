@@ -33,6 +33,7 @@ from catheter_models.errors import ParameterError
 from catheter_ros import qos
 from catheter_ros.messages import angle_rad_from, ns_from_time
 from catheter_ros.node_main import run_node_as_main
+from catheter_ros.params import declare_plain
 
 URDF_RESOURCE: Final = "urdf/catheter.urdf"
 """The model inside the ``catheter_control`` package (also installed to ``share/``)."""
@@ -238,7 +239,12 @@ class TipTfNode(Node):
 
     def __init__(self) -> None:
         super().__init__("tip_tf")
-        rate = float(self.declare_parameter("max_rate_hz", MAX_RATE_HZ).value)
+        # Through params: an integer (max_rate_hz:=30) is taken as the double it means.
+        rate = float(
+            declare_plain(
+                self, "max_rate_hz", MAX_RATE_HZ, "most tip/angle samples a second", False
+            )
+        )
         self.tf = TipTf(self, rate)
         self.bad_samples = 0
         self.create_subscription(JointState, TIP_ANGLE.name, self._on_angle, qos.SENSOR)
