@@ -634,7 +634,7 @@ def main(argv: list[str] | None = None) -> int:
     if failure:
         print(f"commission: stopped: {failure}", file=sys.stderr)
         print("commission: nothing was commissioned", file=sys.stderr)
-    report = write_report(job, failure)
+    report = write_report(job, failure, job.out_dir / MODEL_DIR, TARGET_RMSE_DEG)
     print(f"commission: report: {report}")
     return code
 

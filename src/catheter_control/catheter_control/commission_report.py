@@ -9,11 +9,51 @@ from __future__ import annotations
 
 import html
 import os
+from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
-if TYPE_CHECKING:
-    from catheter_control.commission import Commission
+from catheter_control.commission_rig import RigChoice
+
+
+class _Step(Protocol):
+    done: bool
+    seconds: float
+    commands: list[str]
+    output: str
+    facts: dict[str, Any]
+
+
+class _State(Protocol):
+    @property
+    def steps(self) -> Mapping[str, _Step]: ...
+
+
+class CommissionView(Protocol):
+    """What the report reads of a commissioning (``commission.Commission`` has it)."""
+
+    out_dir: Path
+    choice: RigChoice
+    protocol: str
+    trajectories: tuple[str, ...]
+
+    @property
+    def state(self) -> _State:
+        """commission.json's steps."""
+        ...
+
+    @property
+    def tune_dir(self) -> Path:
+        """Where the tuning wrote its gains and report."""
+        ...
+
+    def bag(self, name: str) -> Path:
+        """A recording's bag directory."""
+        ...
+
+    def scores(self) -> dict[str, dict[str, float]]:
+        """RMSE [deg] by candidate and trajectory."""
+        ...
 
 
 def _rel(path: Path, start: Path) -> str:
@@ -56,10 +96,17 @@ def _table(header: list[str], rows: list[list[str]]) -> str:
     return f"<table><tr>{head}</tr>{body}</table>"
 
 
-def write_report(job: Commission, failure: str) -> Path:
-    """Write ``OUT/report/index.html``; returns its path."""
-    from catheter_control.commission import MODEL_DIR, TARGET_RMSE_DEG
+def write_report(
+    job: CommissionView, failure: str, model_dir: Path, target_rmse_deg: float
+) -> Path:
+    """Write ``OUT/report/index.html``; returns its path.
 
+    Args:
+        job: The commissioning, done or stopped.
+        failure: Why it stopped ('' if it did not).
+        model_dir: Where the commissioned model is written.
+        target_rmse_deg: The tracking target each trajectory is held to [deg].
+    """
     out = job.out_dir / "report"
     out.mkdir(parents=True, exist_ok=True)
     steps = job.state.steps
@@ -81,14 +128,14 @@ def write_report(job: Commission, failure: str) -> Path:
         f = select.facts
         parts.append(
             f"<p><b>Commissioned:</b> {html.escape(str(f['compensator']))} with feedback "
-            f"{html.escape(str(f['feedback']))}, in <code>{_rel(job.out_dir / MODEL_DIR, out)}"
+            f"{html.escape(str(f['feedback']))}, in <code>{_rel(model_dir, out)}"
             "</code>: <code>follow_trajectory --model-dir "
-            f"{html.escape(str(job.out_dir / MODEL_DIR))}</code></p>"
+            f"{html.escape(str(model_dir))}</code></p>"
         )
         if f.get("misses"):
             misses = ", ".join(f"{t} ({r:.3f}°)" for t, r in f["misses"].items())
             parts.append(
-                f"<p class='miss'>Not reached: the {TARGET_RMSE_DEG}° RMSE target on {misses}.</p>"
+                f"<p class='miss'>Not reached: the {target_rmse_deg}° RMSE target on {misses}.</p>"
             )
 
     # Time per step.
@@ -151,13 +198,13 @@ def write_report(job: Commission, failure: str) -> Path:
     # Tracking.
     scores = job.scores()
     if scores:
-        parts.append(f"<h2>Tracking, closed loop (RMSE [°], target ≤ {TARGET_RMSE_DEG}°)</h2>")
+        parts.append(f"<h2>Tracking, closed loop (RMSE [°], target ≤ {target_rmse_deg}°)</h2>")
         rows = []
         for cand, by_traj in scores.items():
             cells = [html.escape(cand)]
             for t in job.trajectories:
                 r = by_traj.get(t)
-                cls = " class='miss'" if r is not None and r > TARGET_RMSE_DEG else ""
+                cls = " class='miss'" if r is not None and r > target_rmse_deg else ""
                 cells.append("-" if r is None else f"<span{cls}>{r:.3f}</span>")
             rows.append(cells)
         parts.append(_table(["candidate", *job.trajectories], rows))
