@@ -131,11 +131,20 @@ def test_domain_ids_refused(value: str, capsys: pytest.CaptureFixture[str]) -> N
     assert "--domain-id" in capsys.readouterr().err
 
 
-def test_nodes_in_a_namespace_are_told_apart_from_others() -> None:
-    nodes = ["/catheter/compensator", "/catheter2/compensator", "/catheter/sub/x", "/other"]
+def test_a_graph_s_nodes_in_the_namespace_are_told_apart_from_tools_and_other_graphs() -> None:
+    nodes = [
+        "/catheter/compensator",
+        "/catheter/sim_hardware",
+        "/catheter/compensator_action",  # the compensator's own helper, named with it
+        "/catheter/follow_trajectory",  # a client of the graph, not a graph
+        "/catheter/test_probe",
+        "/catheter2/compensator",
+        "/catheter/sub/compensator",
+        "/compensator",
+    ]
     assert graph_domain.in_namespace(nodes, "/catheter") == [
         "/catheter/compensator",
-        "/catheter/sub/x",
+        "/catheter/sim_hardware",
     ]
 
 

@@ -23,13 +23,14 @@ class GraphConflictError(CatheterError):
     """Another graph already runs in the namespace and domain a new one would start in."""
 
 
-DISCOVERY_WAIT_S = 1.5
+DISCOVERY_WAIT_S = 2.0
 """How long a look for nodes already in a domain lasts before a graph is started there. A new
-DDS participant announces itself at once and the others answer it, and the node names follow
-on ``ros_discovery_info`` (transient local): on one host that takes well under half a second,
-so 1.5 s covers a busy host with room to spare, while every start pays it once. A look that
-ends too soon lets two graphs configure each other's nodes; it cannot stop a graph started
-later, which makes its own look."""
+DDS participant announces itself at once and the others answer it; the node names follow on
+``ros_discovery_info``, participant by participant. On an idle host that takes a few hundred
+ms; on our busy 2-core test machine 1.5 s saw one node of a running graph and not the other,
+so a look that short could miss a whole graph. 2 s is commission's window for the same look
+(commission_rig._DISCOVERY_S), and every start pays it once. A graph started after the look is
+not seen; it makes its own look."""
 
 AUTO_DOMAIN_RANGE = (1, 99)
 """Where ``--domain-id auto`` looks for a domain: not 0 (every ROS tool's and rig's default),
@@ -88,10 +89,18 @@ def nodes_in_domain(domain_id: int, wait_s: float = DISCOVERY_WAIT_S) -> list[st
     return found
 
 
+GRAPH_NODES = frozenset(
+    {"sim_hardware", "valve_driver", "laser_angle", "compensator", "recorder", "tip_tf"}
+)
+"""The nodes a launcher starts. Another graph's are what clash (its lifecycle nodes would be
+configured twice, its compensator take our trajectories); a tool in the namespace (a probe,
+``follow_trajectory`` on a running graph, Foxglove's bridge) does not."""
+
+
 def in_namespace(nodes: Sequence[str], namespace: str) -> list[str]:
-    """The nodes of ``nodes`` (full names) that live in ``namespace`` or below it."""
+    """The graph's nodes (:data:`GRAPH_NODES`) among ``nodes`` (full names) in ``namespace``."""
     ns = namespace.rstrip("/")
-    return [n for n in nodes if n.rsplit("/", 1)[0] == ns or n.startswith(f"{ns}/")]
+    return [n for n in nodes if n.rsplit("/", 1)[0] == ns and n.rsplit("/", 1)[1] in GRAPH_NODES]
 
 
 def current_domain_id() -> int:
