@@ -84,8 +84,8 @@ def test_bringup_passes_its_choices_to_the_compensator_and_the_plant_to_the_rig(
 def test_bringup_refuses_a_contradicting_compensator_before_anything_starts(
     capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    started: list[object] = []
-    monkeypatch.setattr(bringup.ProcessGraph, "start", started.append)
+    started: list[bringup.ProcessGraph] = []
+    monkeypatch.setattr(bringup.ProcessGraph, "start", _record_into(started))
     with pytest.raises(SystemExit) as stop:
         bringup.main(["--compensator", "clstm", "--model-dir", IDRDPI])
     assert stop.value.code == 2
@@ -146,6 +146,15 @@ def test_a_graph_s_nodes_in_the_namespace_are_told_apart_from_tools_and_other_gr
         "/catheter/compensator",
         "/catheter/sim_hardware",
     ]
+
+
+def _record_into(started: list[bringup.ProcessGraph]) -> object:
+    """A stand-in for ProcessGraph.start that keeps the graph instead of starting it."""
+
+    def start(self: bringup.ProcessGraph) -> None:
+        started.append(self)
+
+    return start
 
 
 def _forget_domain(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -238,3 +247,33 @@ def test_auto_gives_up_naming_the_busy_domains(monkeypatch: pytest.MonkeyPatch) 
     monkeypatch.setattr(graph_domain, "nodes_in_domain", lambda d, wait_s=0.0: ["/x/y"])
     with pytest.raises(graph_domain.GraphConflictError, match="--domain-id N"):
         graph_domain.choose_domain("auto", "/catheter", "test")
+
+
+@pytest.mark.parametrize("rig", ["--sim", "--emulated-rig"])
+def test_the_plant_reaches_sim_hardware_or_the_emulated_rig(
+    rig: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    started: list[bringup.ProcessGraph] = []
+    device_args: list[list[str]] = []
+    monkeypatch.setattr(bringup.ProcessGraph, "start", _record_into(started))
+
+    def fake_devices(self: bringup.EmulatedDevices) -> dict[str, dict[str, object]]:
+        device_args.append(self.args)
+        return {k: {"port": f"/dev/{k}"} for k in ("keller_serial", "dac_serial", "adc_serial")}
+
+    monkeypatch.setattr(bringup.EmulatedDevices, "start", fake_devices)
+    _forget_domain(monkeypatch)
+    args = follow_trajectory._parse([rig, "--plant", "my_lab.rod:make_plant"])
+    args.compensator = "clstm"
+    local = local_graph.start_local_graph(args, tmp_path, tmp_path / "bag", "t", {})
+    (graph,) = started
+    assert local.graph is graph
+    specs = {s.name: s for s in graph.specs}
+    if rig == "--sim":
+        assert specs["sim_hardware"].params["plant"] == "my_lab.rod:make_plant"
+        assert not device_args
+    else:
+        (argv,) = device_args
+        assert argv[argv.index("--plant") + 1] == "my_lab.rod:make_plant"
+        assert "sim_hardware" not in specs
+    assert "my_lab.rod:make_plant" in specs["recorder"].params["custom_data"]  # type: ignore[operator]
