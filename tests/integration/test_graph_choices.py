@@ -165,3 +165,24 @@ def test_sigint_while_the_graph_comes_up_stops_it_and_exits_130(
     log = children.log("follow_trajectory")
     assert "Traceback" not in log and "KeyboardInterrupt" not in log
     assert "interrupted while the graph came up" in log, log
+
+
+def test_the_compensator_node_takes_its_kind_from_the_model_directory(
+    children: Children,
+) -> None:
+    """``model_dir`` alone runs the kind its manifest names; a ``compensator`` given beside it
+    that contradicts the manifest stops the node at configure naming both (exit 2)."""
+    idrdpi = str(shipped_model_dir("idrdpi"))
+    base = {"require_pressure_measured": False, "model_dir": idrdpi}
+    proc = children.start("alone", node_argv("catheter_control.compensator_node", base))
+    assert _wait_for_line(children, "alone", "compensator 'idrdpi' at", 60.0), children.log("alone")
+    proc.send_signal(signal.SIGINT)
+    assert proc.wait(30.0) == 0, children.log("alone")
+    contradicting = children.run(
+        "contradicting",
+        node_argv("catheter_control.compensator_node", {**base, "compensator": "clstm"}),
+        60.0,
+    )
+    out = contradicting.stdout + contradicting.stderr
+    assert contradicting.returncode == 2, out
+    assert "'clstm'" in out and "'idrdpi'" in out and "Traceback" not in out
