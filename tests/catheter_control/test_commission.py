@@ -166,3 +166,23 @@ def test_bad_arguments_are_refused_by_name(
         cm.main(argv)
     assert exc.value.code == 2
     assert message in capsys.readouterr().err
+
+
+def test_a_commissioned_model_directory_runs_with_the_feedback_it_was_verified_with(
+    tmp_path: Path,
+) -> None:
+    from catheter_control.models import resolve_feedback
+    from catheter_models.errors import ParameterError
+
+    job = _job(tmp_path)
+    _fake_runs(job, {"idrdpi": [0.2, 0.25, 0.22, 0.28]})
+    job._select()
+    model = str(job.out_dir / cm.MODEL_DIR)
+    assert resolve_feedback(None, model) == "pi"
+    # Asked for, it wins; a model directory commission did not write runs without feedback.
+    assert resolve_feedback("none", model) == "none"
+    assert resolve_feedback(None, str(job.candidate_dir("idrdpi"))) == "none"
+    assert resolve_feedback(None, "") == "none"
+    (job.out_dir / cm.MODEL_DIR / cm.COMMISSIONED_FILE).write_text('{"feedback": "pid"}')
+    with pytest.raises(ParameterError, match="names feedback 'pid'"):
+        resolve_feedback(None, model)

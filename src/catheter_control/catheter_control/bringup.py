@@ -560,9 +560,10 @@ def add_graph_choices(parser: argparse.ArgumentParser, *, domain_default: str | 
     parser.add_argument(
         "--feedback",
         choices=FEEDBACKS,
-        default="none",
+        default=None,
         help="feedback on the measured bend beside the compensator (pi: gains from "
-        "--feedback-gains)",
+        "--feedback-gains); default: what a commissioned --model-dir was verified with, "
+        "else none",
     )
     parser.add_argument(
         "--feedback-gains",
@@ -604,7 +605,7 @@ def compensator_choice(args: argparse.Namespace) -> dict[str, object]:
         params["compensator"] = resolve_compensator(args.compensator, args.model_dir)
     if args.model_dir:
         params["model_dir"] = str(args.model_dir)
-    if args.feedback != "none":
+    if args.feedback is not None:
         params["feedback"] = args.feedback
     if args.feedback_gains:
         params["feedback_gains"] = str(args.feedback_gains)

@@ -50,6 +50,7 @@ from catheter_control.commission_rig import (
     RigError,
     check_response,
 )
+from catheter_control.models import COMMISSIONED_FILE
 from catheter_control.trajectory import (
     TrajectoryLimits,
     TrajectoryPlan,
@@ -75,8 +76,6 @@ EXIT_INTERRUPTED = 130
 
 STATE_FILE = "commission.json"
 MODEL_DIR = "model"
-COMMISSIONED_FILE = "commissioned.json"
-"""Written into the model directory: what the node should run it with (kind, feedback)."""
 TARGET_RMSE_DEG = 0.3
 """The tracking each thesis trajectory should reach with feedback (issue's target)."""
 LEAD_IN_S = 1.0

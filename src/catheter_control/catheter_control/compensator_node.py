@@ -45,6 +45,7 @@ from catheter_control.models import (
     load_compensator,
     load_feedback,
     resolve_compensator,
+    resolve_feedback,
 )
 from catheter_control.trajectory import TrajectoryLimits, TrajectoryPlan
 from catheter_control.trajectory_action import RunProgress, TrajectoryActionServer
@@ -120,11 +121,17 @@ class CompensatorNode(LifecycleLoopNode):
         # files pass it by default), the manifest says it.
         given = "compensator" in getattr(self, "_parameter_overrides", {})
         self._kind_asked = self.kind if given and self.kind else None
-        self.feedback_kind = str(
+        feedback = str(
             declare_plain(
-                self, "feedback", "none", f"feedback on tip/angle: one of {', '.join(FEEDBACKS)}"
+                self,
+                "feedback",
+                "",
+                f"feedback on tip/angle: one of {', '.join(FEEDBACKS)} ('' = what a "
+                "commissioned model_dir was verified with, else none)",
             )
         )
+        self._feedback_asked = feedback or None
+        self.feedback_kind = feedback or "none"
         self.gains_path = str(
             declare_plain(
                 self,
@@ -208,6 +215,7 @@ class CompensatorNode(LifecycleLoopNode):
                 raise ParameterError(
                     f"min_pressure_pa {self.pmin_pa} exceeds max_pressure_pa {self.pmax_pa}"
                 )
+            self.feedback_kind = resolve_feedback(self._feedback_asked, self.model_dir)
             feedback = load_feedback(
                 self.feedback_kind, self.gains_path, self.model_dir, self.rate_hz
             )

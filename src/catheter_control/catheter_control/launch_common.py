@@ -98,10 +98,11 @@ def compensator_arguments(
         ),
         DeclareLaunchArgument(
             "feedback",
-            default_value="none",
-            choices=list(FEEDBACKS),
+            default_value="",
+            choices=["", *FEEDBACKS],
             description="feedback on tip/angle beside the compensator (pi: gains from "
-            "feedback_gains; tip/angle is then required)",
+            "feedback_gains; tip/angle is then required); '' = what a commissioned model_dir "
+            "was verified with, else none",
         ),
         DeclareLaunchArgument(
             "feedback_gains",

@@ -23,7 +23,7 @@ from catheter_control.bringup import (
     sim_graph_specs,
 )
 from catheter_control.graph_domain import choose_domain
-from catheter_control.models import SHIPPED, resolve_compensator
+from catheter_control.models import SHIPPED, resolve_compensator, resolve_feedback
 from catheter_models.errors import CatheterError
 from catheter_models.geometry import Calibration
 from catheter_models.plant import PlantConfig
@@ -66,6 +66,8 @@ def prepare_local_graph(args: argparse.Namespace) -> None:
     # A local graph must never reach a real rig on the network.
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     args.compensator = resolve_compensator(args.compensator, args.model_dir)
+    # A commissioned model directory runs with the feedback it was verified with.
+    args.feedback = resolve_feedback(args.feedback, args.model_dir)
     choice = args.domain_id or ("env" if os.environ.get("ROS_DOMAIN_ID") else "auto")
     choose_domain(choice, args.namespace, "follow_trajectory")
 

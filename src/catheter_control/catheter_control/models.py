@@ -82,6 +82,38 @@ def resolve_compensator(kind: str | None, model_dir: str) -> str:
     return held
 
 
+COMMISSIONED_FILE = "commissioned.json"
+"""Written by ``commission`` into the model directory it chose: how to run it (its feedback)."""
+
+
+def resolve_feedback(kind: str | None, model_dir: str) -> str:
+    """The feedback to run: ``kind`` if given, else what ``commission`` ran the model with.
+
+    A model directory that ``commission`` wrote carries ``commissioned.json``; its feedback
+    (with the ``feedback.json`` beside it) is how the model was verified, so a directory given
+    alone runs that way. Anything else runs without feedback unless asked.
+
+    Raises:
+        ParameterError: unknown ``kind``, or a ``commissioned.json`` that is not one.
+    """
+    import json
+
+    if kind is not None:
+        if kind not in FEEDBACKS:
+            raise ParameterError(f"unknown feedback {kind!r}; available: {', '.join(FEEDBACKS)}")
+        return kind
+    path = Path(model_dir) / COMMISSIONED_FILE if model_dir else None
+    if path is None or not path.exists():
+        return "none"
+    try:
+        held = json.loads(path.read_text())["feedback"]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ParameterError(f"{path} is not a commissioning record: {exc!r}") from None
+    if held not in FEEDBACKS:
+        raise ParameterError(f"{path} names feedback {held!r}; available: {', '.join(FEEDBACKS)}")
+    return str(held)
+
+
 def shipped_model_dir(name: str = "static_map") -> Path:
     """Directory of a model shipped inside this package (fitted on the simulated rig)."""
     return Path(str(resources.files("catheter_control") / "data" / name))
