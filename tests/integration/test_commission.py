@@ -134,11 +134,11 @@ def test_commission_stops_on_a_rig_that_does_not_respond(
     assert "Not commissioned" in (out / "report" / "index.html").read_text()
 
 
-def test_commission_on_a_running_graph_refuses_one_whose_compensator_runs(
+def test_commission_refuses_a_domain_whose_graph_it_would_fight(
     children: Children, tmp_path: Path
 ) -> None:
     from catheter_control.bringup import sim_graph_specs
-    from catheter_control.commission import EXIT_GRAPH
+    from catheter_control.commission import EXIT_GRAPH, EXIT_REFUSED
 
     argv = [sys.executable, "-m", "catheter_control.commission", "-o", str(tmp_path / "c")]
     # Nothing runs in the domain: the drivers are named as missing.
@@ -150,4 +150,11 @@ def test_commission_on_a_running_graph_refuses_one_whose_compensator_runs(
     done = children.run("commission_beside", argv, timeout_s=120.0)
     assert done.returncode == EXIT_GRAPH, done.stderr
     assert "/catheter/compensator is running" in done.stderr
+    # And a simulated rig of its own in that domain would command the other graph's nodes.
+    sim_argv = [*argv[:-1], str(tmp_path / "sim"), "--sim"]
+    done = children.run("commission_sim_beside", sim_argv, timeout_s=120.0)
+    assert done.returncode == EXIT_REFUSED, done.stderr
+    assert "another graph already runs" in done.stderr
+    assert "/catheter/sim_hardware" in done.stderr
     assert not (tmp_path / "c" / MODEL_DIR).exists()
+    assert not (tmp_path / "sim" / MODEL_DIR).exists()

@@ -35,6 +35,7 @@ import functools
 import io
 import json
 import math
+import os
 import shutil
 import sys
 import time
@@ -50,6 +51,7 @@ from catheter_control.commission_rig import (
     RigError,
     check_response,
 )
+from catheter_control.graph_domain import GraphConflictError, domain_id_argument
 from catheter_control.models import COMMISSIONED_FILE
 from catheter_control.trajectory import (
     TrajectoryLimits,
@@ -557,6 +559,14 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
     )
     parser.add_argument("--namespace", default=DEFAULT_NAMESPACE)
     parser.add_argument(
+        "--domain-id",
+        type=domain_id_argument,
+        default=None,
+        help="with --sim/--emulated-rig: ROS domain of the rig it starts: auto = one where "
+        "nobody is (printed), env = ROS_DOMAIN_ID as set, N = that one (default: env when "
+        "ROS_DOMAIN_ID is set, else auto, so a simulated rig never lands on a real one's)",
+    )
+    parser.add_argument(
         "--protocol",
         choices=PROTOCOLS,
         default="full",
@@ -585,6 +595,8 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--control-rate-hz", type=float, default=CONTROL_RATE_HZ)
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
     args = parser.parse_args(argv)
+    if args.domain_id is not None and not (args.sim or args.emulated_rig):
+        parser.error("--domain-id needs --sim or --emulated-rig (a running rig's is its own)")
     if args.plant and not (args.sim or args.emulated_rig):
         parser.error("--plant needs --sim or --emulated-rig (a real rig has its own plant)")
     if args.clstm_budget_s < 0 or not math.isfinite(args.clstm_budget_s):
@@ -603,10 +615,11 @@ def main(argv: list[str] | None = None) -> int:
 
     args = _parse(argv)
     mode = "sim" if args.sim else "emulated" if args.emulated_rig else "running"
+    domain = args.domain_id or ("env" if os.environ.get("ROS_DOMAIN_ID") else "auto")
     try:
         job = Commission(
             out_dir=args.output,
-            choice=RigChoice(mode, args.plant, args.namespace),
+            choice=RigChoice(mode, args.plant, args.namespace, domain),
             protocol=args.protocol,
             clstm_budget_s=args.clstm_budget_s,
             explain_steps=args.explain_steps,
@@ -623,6 +636,8 @@ def main(argv: list[str] | None = None) -> int:
         code = job.run()
     except KeyboardInterrupt:
         failure, code = "interrupted (Ctrl-C); rerun the same command to go on", EXIT_INTERRUPTED
+    except GraphConflictError as exc:
+        failure, code = str(exc), EXIT_REFUSED
     except RigError as exc:
         failure = str(exc)
         code = EXIT_GRAPH if not job._rig_up else EXIT_STOPPED

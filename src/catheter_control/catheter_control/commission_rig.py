@@ -83,6 +83,8 @@ class RigChoice:
     mode: str
     plant: str
     namespace: str
+    domain: str = "env"
+    """``--domain-id`` for a rig commission starts (auto, env, N); a running rig's is env."""
 
     def describe(self) -> str:
         """One line for the terminal and the report."""
@@ -94,7 +96,7 @@ class RigChoice:
         return f"the drivers already running in {self.namespace}"
 
     def to_dict(self) -> dict[str, str]:
-        """For commission.json: a directory is commissioned on one rig."""
+        """For commission.json: a directory is commissioned on one rig (any domain)."""
         return {"mode": self.mode, "plant": self.plant, "namespace": self.namespace}
 
 
@@ -165,11 +167,16 @@ class CommissionRig:
         Raises:
             RigError: a node or the emulated devices failed to start, or (``running``) no
                 driver publishes in the namespace, or a compensator already runs there.
+            GraphConflictError: (``sim``, ``emulated``) another graph runs in the domain.
         """
+        from catheter_control.graph_domain import choose_domain
+
         choice = self.choice
         if choice.mode in ("sim", "emulated"):
-            # A local rig must never reach a real one on the network.
+            # A local rig must never reach a real one on the network, nor a graph running in
+            # its domain (GraphConflictError names it).
             os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+            choose_domain(choice.domain, choice.namespace, "commission")
         if choice.mode == "running":
             self._check_running()
             return
