@@ -1,6 +1,7 @@
 """Trajectory validation: refused with a message that names the point and the limit."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,6 +13,7 @@ from catheter_control.trajectory import (
     preset_knots,
     with_lead_in,
 )
+from catheter_models.contract import MAX_TRAJECTORY_FILE_BYTES
 from catheter_models.errors import SignalError
 from catheter_models.signals import TEST_TRAJECTORIES
 
@@ -103,3 +105,56 @@ def test_a_trajectory_that_starts_at_rest_is_left_alone() -> None:
     t, a = preset_knots("traj_up_chirp")
     t2, a2, lead_s = with_lead_in(t, a)
     assert lead_s == 0.0 and t2 is t and a2 is a
+
+
+def test_more_points_than_the_limit_are_refused_naming_it() -> None:
+    n = LIM.max_points + 1
+    with pytest.raises(SignalError, match=rf"{n} points, over the limit of {LIM.max_points}"):
+        TrajectoryPlan.from_knots(np.arange(1, n + 1) * 0.01, np.zeros(n), LIM, 250.0)
+
+
+def test_a_trajectory_at_the_point_limit_is_accepted() -> None:
+    n = LIM.max_points  # the longest thesis-rate (50 Hz) trajectory the limits allow
+    p = TrajectoryPlan.from_knots(np.arange(1, n + 1) / 50.0, np.zeros(n), LIM, 250.0)
+    assert p.duration_s == pytest.approx(LIM.max_duration_s)
+
+
+def test_a_point_past_the_duration_limit_is_refused_naming_it() -> None:
+    with pytest.raises(SignalError, match=r"point 1 .*over the limit of 600 s.*DURATION"):
+        plan([1.0, LIM.max_duration_s + 1.0], [5.0, 5.0])
+
+
+def test_a_file_over_the_byte_limit_is_refused_unread(tmp_path: Path) -> None:
+    path = tmp_path / "huge.csv"
+    path.write_text("t_s,angle_deg\n" + "not,even,parsed\n" * 40)
+    with pytest.raises(SignalError, match=r"over the limit of 100 .*FILE_BYTES.*not read"):
+        load_trajectory_file(path, max_bytes=100)
+
+
+def test_a_csv_with_more_rows_than_the_limit_is_refused_at_the_first_row_over(
+    tmp_path: Path,
+) -> None:
+    path = tmp_path / "long.csv"
+    # The row after the limit is garbage: refused for its count, before it is parsed.
+    path.write_text("t_s,angle_deg\n1,0\n2,0\n3,0\nthree,x\n")
+    with pytest.raises(SignalError, match=r"long.csv:5: more than 3 rows.*MAX_TRAJECTORY_POINTS"):
+        load_trajectory_file(path, max_points=3)
+    path.write_text("t_s,angle_deg\n1,0\n2,0\n3,0\n")
+    t_s, _ = load_trajectory_file(path, max_points=3)
+    assert list(t_s) == [1.0, 2.0, 3.0]
+
+
+def test_a_yaml_file_with_more_points_than_the_limit_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / "long.yaml"
+    path.write_text("t_s: [1, 2, 3, 4]\nangle_deg: [0, 0, 0, 0]\n")
+    with pytest.raises(SignalError, match=r"4 points, over the limit of 3"):
+        load_trajectory_file(path, max_points=3)
+
+
+def test_the_contract_s_file_limit_refuses_a_huge_file_by_its_size(tmp_path: Path) -> None:
+    path = tmp_path / "huge.csv"
+    with path.open("wb") as fh:  # sparse: as big as the limit says, without writing it
+        fh.write(b"t_s,angle_deg\n")
+        fh.truncate(MAX_TRAJECTORY_FILE_BYTES + 1)
+    with pytest.raises(SignalError, match=rf"{MAX_TRAJECTORY_FILE_BYTES + 1} bytes"):
+        load_trajectory_file(path)

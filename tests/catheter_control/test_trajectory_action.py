@@ -31,7 +31,12 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from catheter_control.trajectory import TrajectoryLimits, TrajectoryPlan
 from catheter_control.trajectory_action import RunProgress, TrajectoryActionServer
-from catheter_models.contract import BEND_JOINT, TIP_ANGLE
+from catheter_models.contract import (
+    BEND_JOINT,
+    MAX_TRAJECTORY_DURATION_S,
+    MAX_TRAJECTORY_POINTS,
+    TIP_ANGLE,
+)
 from catheter_models.errors import CatheterError
 from catheter_ros import messages
 
@@ -213,8 +218,19 @@ def test_a_goal_that_runs_to_its_end_succeeds_with_feedback(rig: Rig) -> None:
     [
         (goal_of(RAMP, joint="elbow"), Result.INVALID_JOINTS, "'elbow'"),
         (goal_of([(1.0, 80.0), (2.0, 0.0)]), Result.INVALID_GOAL, "outside the allowed"),
+        (
+            goal_of([(0.01 * (i + 1), 0.0) for i in range(MAX_TRAJECTORY_POINTS + 1)]),
+            Result.INVALID_GOAL,
+            f"{MAX_TRAJECTORY_POINTS + 1} points, over the limit of {MAX_TRAJECTORY_POINTS} "
+            "(MAX_TRAJECTORY_POINTS)",
+        ),
+        (
+            goal_of([(1.0, 5.0), (MAX_TRAJECTORY_DURATION_S + 1.0, 5.0)]),
+            Result.INVALID_GOAL,
+            "(MAX_TRAJECTORY_DURATION_S)",
+        ),
     ],
-    ids=["wrong joint", "beyond the angle limit"],
+    ids=["wrong joint", "beyond the angle limit", "too many points", "too long"],
 )
 def test_a_refused_goal_ends_with_the_reason_and_nothing_runs(
     rig: Rig, goal: Any, code: int, reason: str

@@ -1,6 +1,8 @@
 """``compensator``: turn a desired-angle trajectory into pressure commands on a real-time loop.
 
-Subscribes ``trajectory`` (validated whole before a single command goes out), publishes
+Subscribes ``trajectory`` (validated whole before a single command goes out; one over the
+contract's size limits, ``MAX_TRAJECTORY_MESSAGE_BYTES``, ``MAX_TRAJECTORY_POINTS`` and
+``MAX_TRAJECTORY_DURATION_S``, is refused whole, the biggest before it is deserialised), publishes
 ``pressure/command`` and ``angle/desired`` at ``control_rate_hz`` (250 Hz by default; 1 kHz
 works) from its own thread against absolute monotonic deadlines, and its timing, refusals
 and faults on ``/diagnostics``. Service ``~/stop`` (std_srvs/Trigger) ramps the pressure down.
@@ -32,6 +34,7 @@ import time
 
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from rclpy.qos import qos_profile_sensor_data
+from rclpy.serialization import deserialize_message
 from rclpy.subscription import MessageInfo, Subscription
 from sensor_msgs.msg import FluidPressure, JointState
 from std_srvs.srv import Trigger
@@ -55,6 +58,7 @@ from catheter_models.contract import (
     CONTROL_RATE_HZ,
     MAX_PRESSURE_PA,
     MAX_SLEW_PA_PER_S,
+    MAX_TRAJECTORY_MESSAGE_BYTES,
     PRESSURE_COMMAND,
     PRESSURE_LIMIT_HARD_PA,
     PRESSURE_MEASURED,
@@ -249,8 +253,10 @@ class CompensatorNode(LifecycleLoopNode):
         if self.accept_trajectories:
             # Subscribed from configure, not activate: a trajectory latched (transient local)
             # while the node was not armed is refused once here, never run on activation.
+            # raw: the message's length is checked before rclpy deserialises it (see
+            # _on_trajectory).
             self._trajectory_sub = self.create_subscription(
-                JointTrajectory, TRAJECTORY.name, self._on_trajectory, qos.TRAJECTORY
+                JointTrajectory, TRAJECTORY.name, self._on_trajectory, qos.TRAJECTORY, raw=True
             )
             self._action = TrajectoryActionServer(self, self, stamp_ns=self.stamp_ns)
         else:
@@ -377,6 +383,9 @@ class CompensatorNode(LifecycleLoopNode):
         """
         if self.active_loop is None or self.core is None:
             return "the compensator is not active (lifecycle: configure, then activate it)"
+        too_many = self.limits.size_error(len(msg.points))
+        if too_many:
+            return too_many  # before the per-point work below
         names = list(msg.joint_names)
         if BEND_JOINT not in names:
             return f"joint_names {names!r} lack {BEND_JOINT!r}"
@@ -437,9 +446,29 @@ class CompensatorNode(LifecycleLoopNode):
         """Whether ``plan`` starts at the held bend (see :meth:`_same_place_rad`)."""
         return abs(float(plan.angle_rad[0]) - held_rad) <= self._same_place_rad() + 1e-12
 
-    def _on_trajectory(self, msg: JointTrajectory, info: MessageInfo) -> None:
+    def _on_trajectory(self, data: bytes, info: MessageInfo) -> None:
+        """A ``trajectory`` message, taken serialised: too big is refused undeserialised.
+
+        Runs on the executor's thread, never the control loop's; what they share is the GIL,
+        which rclpy's deserialisation holds while it builds a Python object per point (13 s
+        for a 10^6-point message on the test machine, during which the loop missed hundreds of
+        deadlines). Its length bounds that work, so it is checked first: copying the bytes
+        out is one memcpy.
+        """
         if self._action is not None and self._action.is_echo(info):
             return  # an action goal's trajectory, republished for the record: already running
+        if len(data) > MAX_TRAJECTORY_MESSAGE_BYTES:
+            self._refuse(
+                f"the message is {len(data)} bytes, over the limit of "
+                f"{MAX_TRAJECTORY_MESSAGE_BYTES} (MAX_TRAJECTORY_MESSAGE_BYTES, about "
+                f"{self.limits.max_points} points); not deserialised"
+            )
+            return
+        try:
+            msg = deserialize_message(data, JointTrajectory)
+        except Exception as exc:  # whatever rclpy raises, the message is refused
+            self._refuse(f"the message does not deserialise as a JointTrajectory: {exc}")
+            return
         self.submit_trajectory(msg)
 
     def stop_trajectory(self) -> None:

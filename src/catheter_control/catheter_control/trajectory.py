@@ -11,6 +11,11 @@ import numpy as np
 import numpy.typing as npt
 import yaml
 
+from catheter_models.contract import (
+    MAX_TRAJECTORY_DURATION_S,
+    MAX_TRAJECTORY_FILE_BYTES,
+    MAX_TRAJECTORY_POINTS,
+)
 from catheter_models.errors import SignalError
 from catheter_models.signals import check_trajectory, get_preset
 from catheter_models.units import deg_to_rad, rad_to_deg
@@ -25,13 +30,25 @@ _ACCEL_CHECK_RATE_HZ = 100.0
 class TrajectoryLimits:
     """What the catheter may be asked to do.
 
-    Defaults suit the thesis's rig (about 30 deg at 3 bar, test trajectories up to about 1 Hz).
+    Defaults suit the thesis's rig (about 30 deg at 3 bar, test trajectories up to about 1 Hz);
+    the size limits are the contract's (``catheter_models.contract``, where they are argued).
     """
 
     min_angle_rad: float = 0.0
     max_angle_rad: float = deg_to_rad(35.0)
     max_rate_rad_s: float = deg_to_rad(200.0)
     max_accel_rad_s2: float = deg_to_rad(5000.0)
+    max_points: int = MAX_TRAJECTORY_POINTS
+    max_duration_s: float = MAX_TRAJECTORY_DURATION_S
+
+    def size_error(self, n_points: int) -> str | None:
+        """Why ``n_points`` points are too many, or None: checked before anything else costs."""
+        if n_points > self.max_points:
+            return (
+                f"trajectory has {n_points} points, over the limit of {self.max_points} "
+                "(MAX_TRAJECTORY_POINTS): split it, or knot it more sparsely"
+            )
+        return None
 
 
 @dataclass(frozen=True)
@@ -59,11 +76,15 @@ class TrajectoryPlan:
         """Validate knots as the controller will follow them: resampled on the control clock.
 
         Raises:
-            SignalError: non-finite, out of range, non-increasing time, too fast or too
-                abrupt; the message names the sample and the limit.
+            SignalError: too many points or too long, non-finite, out of range,
+                non-increasing time, too fast or too abrupt; the message names the sample and
+                the limit.
         """
         t = np.asarray(t_s, dtype=float).ravel()
         a = np.asarray(angle_rad, dtype=float).ravel()
+        too_many = limits.size_error(max(t.size, a.size))
+        if too_many:
+            raise SignalError(too_many)
         if t.size == 0 or t.shape != a.shape:
             raise SignalError(
                 f"trajectory needs matching, non-empty times and angles (got {t.size}, {a.size})"
@@ -85,6 +106,12 @@ class TrajectoryPlan:
             )
         if t[0] < 0.0:
             raise SignalError(f"trajectory point 0 has negative time_from_start {t[0]} s")
+        if np.max(t) > limits.max_duration_s:
+            i = int(np.argmax(t > limits.max_duration_s))
+            raise SignalError(
+                f"trajectory point {i} is at time_from_start {t[i]:g} s, over the limit of "
+                f"{limits.max_duration_s:g} s (MAX_TRAJECTORY_DURATION_S)"
+            )
         if t[0] > 0.0:
             # The plan starts at rest (straight) at t = 0 and moves to the first point.
             t = np.concatenate([[0.0], t])
@@ -127,11 +154,16 @@ class TrajectoryPlan:
         return float(np.interp(elapsed_s, self.t_s, self.angle_rad))
 
 
-def load_trajectory_file(path: Path) -> tuple[FloatArray, FloatArray]:
+def load_trajectory_file(
+    path: Path,
+    max_bytes: int = MAX_TRAJECTORY_FILE_BYTES,
+    max_points: int = MAX_TRAJECTORY_POINTS,
+) -> tuple[FloatArray, FloatArray]:
     """Read trajectory knots from a CSV or YAML file.
 
     CSV has columns ``t_s`` and ``angle_deg`` (or ``angle_rad``); YAML is a mapping
-    ``{t_s: [...], angle_deg: [...]}`` or a list of ``{t_s, angle_deg}``.
+    ``{t_s: [...], angle_deg: [...]}`` or a list of ``{t_s, angle_deg}``. A file over
+    ``max_bytes`` is refused unread, a CSV at its ``max_points + 1``-th row.
 
     Returns:
         Knot times [s] and angles [rad].
@@ -139,6 +171,15 @@ def load_trajectory_file(path: Path) -> tuple[FloatArray, FloatArray]:
     path = Path(path)
     if not path.is_file():
         raise SignalError(f"trajectory file {path} does not exist")
+    # Cheap checks first: the size from the directory entry, the rows while reading, so a
+    # file far over the limits is refused before it is parsed (a 10^7-row CSV took 66 s and
+    # 1.16 GB to parse whole).
+    size_bytes = path.stat().st_size
+    if size_bytes > max_bytes:
+        raise SignalError(
+            f"trajectory file {path} is {size_bytes} bytes, over the limit of {max_bytes} "
+            "(MAX_TRAJECTORY_FILE_BYTES); not read"
+        )
     rows: dict[str, list[float]]
     if path.suffix.lower() in {".yaml", ".yml"}:
         raw = yaml.safe_load(path.read_text())
@@ -153,6 +194,11 @@ def load_trajectory_file(path: Path) -> tuple[FloatArray, FloatArray]:
             reader = csv.DictReader(fh)
             rows = {name: [] for name in reader.fieldnames or []}
             for line_no, row in enumerate(reader, start=2):
+                if line_no - 1 > max_points:
+                    raise SignalError(
+                        f"{path}:{line_no}: more than {max_points} rows, the limit of points "
+                        "(MAX_TRAJECTORY_POINTS); not read further"
+                    )
                 for key, value in row.items():
                     try:
                         rows[key].append(float(value))
@@ -162,6 +208,11 @@ def load_trajectory_file(path: Path) -> tuple[FloatArray, FloatArray]:
                         ) from None
     if "t_s" not in rows:
         raise SignalError(f"{path}: no 't_s' column/key; found {sorted(rows)}")
+    n_points = max((len(v) for v in rows.values()), default=0)
+    if n_points > max_points:
+        raise SignalError(
+            f"{path}: {n_points} points, over the limit of {max_points} (MAX_TRAJECTORY_POINTS)"
+        )
     if "angle_rad" in rows:
         angle = np.asarray(rows["angle_rad"], dtype=float)
     elif "angle_deg" in rows:

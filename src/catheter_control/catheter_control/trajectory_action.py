@@ -68,7 +68,13 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from catheter_control.trajectory import TrajectoryPlan
-from catheter_models.contract import BEND_JOINT, TIP_ANGLE, TRAJECTORY
+from catheter_models.contract import (
+    BEND_JOINT,
+    MAX_TRAJECTORY_DURATION_S,
+    MAX_TRAJECTORY_POINTS,
+    TIP_ANGLE,
+    TRAJECTORY,
+)
 from catheter_models.units import rad_to_deg
 from catheter_ros import messages, qos
 from catheter_ros.polled import PolledTopics
@@ -276,6 +282,21 @@ class TrajectoryActionServer:
     # -- goals ----------------------------------------------------------------------------
     def check_goal(self, goal: FollowJointTrajectory.Goal) -> tuple[int, str]:
         """What the action itself refuses before the compensator sees the trajectory."""
+        # Size first: everything below (and the compensator's checks) costs per point.
+        n_points = len(goal.trajectory.points)
+        if n_points > MAX_TRAJECTORY_POINTS:
+            return Result.INVALID_GOAL, (
+                f"trajectory has {n_points} points, over the limit of {MAX_TRAJECTORY_POINTS} "
+                "(MAX_TRAJECTORY_POINTS): split it, or knot it more sparsely"
+            )
+        if n_points and _seconds(goal.trajectory.points[-1].time_from_start) > (
+            MAX_TRAJECTORY_DURATION_S
+        ):
+            last_s = _seconds(goal.trajectory.points[-1].time_from_start)
+            return Result.INVALID_GOAL, (
+                f"trajectory lasts {last_s:g} s, over the limit of {MAX_TRAJECTORY_DURATION_S:g} s "
+                "(MAX_TRAJECTORY_DURATION_S)"
+            )
         names = list(goal.trajectory.joint_names)
         if names != [BEND_JOINT]:
             return Result.INVALID_JOINTS, (

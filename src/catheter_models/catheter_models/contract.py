@@ -41,6 +41,31 @@ PRESSURE_LIMIT_HARD_PA: Final = 6.0e5
 span, the top of the 0-6 bar valve modules' range): beyond it a typo, not a choice."""
 
 
+MAX_TRAJECTORY_DURATION_S: Final = 600.0
+"""The longest trajectory (time of its last point) the compensator takes: 10 minutes.
+
+The thesis's trajectories last 20-40 s; a long procedure is minutes. Beyond 10 minutes a plan is
+more likely a unit slip (ms for s) than a procedure, and a hold or a new trajectory goes on."""
+MAX_TRAJECTORY_POINTS: Final = 30_000
+"""The most points one trajectory may have: the longest one with knots at 50 Hz, the thesis's
+knot rate (``MAX_TRAJECTORY_DURATION_S`` x 50), or two minutes knotted at the control rate.
+
+The bound is what keeps taking a trajectory off the control loop's back: rclpy builds a Python
+object per point while holding the GIL the loop thread needs (about 18 us a point measured on the
+busy 2-core test machine, so a 10^6-point message held it for 13 s; 30,000 points take 0.5 s,
+handed over to the loop every GIL switch interval)."""
+MAX_TRAJECTORY_MESSAGE_BYTES: Final = 2 * 1024 * 1024
+"""The largest serialised ``trajectory`` message the compensator deserialises (2 MiB).
+
+A point of the one joint with a position is 48 bytes in CDR, with a velocity too 56, so 2 MiB
+holds ``MAX_TRAJECTORY_POINTS`` of them; anything bigger is refused by its length, before rclpy
+turns it into Python objects."""
+MAX_TRAJECTORY_FILE_BYTES: Final = 4 * 1024 * 1024
+"""The largest trajectory file (CSV/YAML) ``follow_trajectory --file`` reads (4 MiB): about 140
+bytes a row for ``MAX_TRAJECTORY_POINTS`` rows, more than a CSV row (~25 bytes) or a YAML point
+(~40 bytes) of the thesis's trajectories takes."""
+
+
 STREAM_DEPTH: Final = 500
 """Samples a stream's publisher keeps for re-sending, and a keeping subscriber queues: 2 s at
 250 Hz, 0.5 s at 1 kHz (longer than any stall measured on a busy machine)."""
