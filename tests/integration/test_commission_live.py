@@ -90,6 +90,29 @@ def test_commission_on_the_simulated_rig_writes_a_model_follow_trajectory_uses(
     assert "Commissioned" in report and "traj_descending_sine" in report
     assert (out / "runs" / "idrdpi+pi" / "traj_descending_sine" / "tracking.png").exists()
 
+    # The model directory runs as it was commissioned: kind and feedback from the directory.
+    done = children.run(
+        "follow_trajectory",
+        [
+            sys.executable,
+            "-m",
+            "catheter_control.follow_trajectory",
+            "--sim",
+            "--model-dir",
+            str(model),
+            "--preset",
+            "traj_descending_sine",
+            "--no-progress",
+            "--domain-id",
+            "env",
+            "--out",
+            str(tmp_path / "run"),
+        ],
+        timeout_s=300.0,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "compensator idrdpi, feedback pi" in done.stdout
+
     # Again: nothing is redone, the same model is chosen.
     code2, stdout2, _ = _commission(
         children,
