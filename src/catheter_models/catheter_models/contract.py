@@ -46,25 +46,26 @@ MAX_TRAJECTORY_DURATION_S: Final = 600.0
 
 The thesis's trajectories last 20-40 s; a long procedure is minutes. Beyond 10 minutes a plan is
 more likely a unit slip (ms for s) than a procedure, and a hold or a new trajectory goes on."""
-MAX_TRAJECTORY_POINTS: Final = 30_000
-"""The most points one trajectory may have: the longest one with knots at 50 Hz, the thesis's
-knot rate (``MAX_TRAJECTORY_DURATION_S`` x 50), or two minutes knotted at the control rate.
+MAX_TRAJECTORY_POINTS: Final = 15_000
+"""The most points one trajectory may have: 5 minutes of knots at 50 Hz, the thesis's knot rate
+(its 20-40 s trajectories have 1,000-2,000), a minute at the control rate, or the longest
+trajectory (``MAX_TRAJECTORY_DURATION_S``) knotted at 25 Hz.
 
-The bound is what keeps taking a trajectory off the control loop's back: rclpy builds a Python
-object per point while holding the GIL the loop thread needs (about 18 us a point measured on the
-busy 2-core test machine, so a 10^6-point message held it for 13 s; 30,000 points take 0.5 s,
-handed over to the loop every GIL switch interval)."""
-MAX_TRAJECTORY_MESSAGE_BYTES: Final = 2 * 1024 * 1024
-"""The largest serialised ``trajectory`` message the compensator deserialises (2 MiB).
+The bound keeps taking a trajectory off the control loop's back: rclpy builds a Python object
+per point, holding the GIL the loop thread needs, about 18 us a point on the busy 2-core test
+machine. A 10^6-point message held it for 13 s (842 missed deadlines, the watchdog vented); one
+of 30,000 points still put the loop 64 ms behind its deadline, close to the 0.1 s watchdog, so
+the limit is half that."""
+MAX_TRAJECTORY_MESSAGE_BYTES: Final = 1024 * 1024
+"""The largest serialised ``trajectory`` message the compensator deserialises (1 MiB).
 
-A point of the one joint with a position is 48 bytes in CDR, with a velocity too 56, so 2 MiB
+A point of the one joint is 32 bytes in CDR with a position, 48 with a velocity too, so 1 MiB
 holds ``MAX_TRAJECTORY_POINTS`` of them; anything bigger is refused by its length, before rclpy
 turns it into Python objects."""
-MAX_TRAJECTORY_FILE_BYTES: Final = 4 * 1024 * 1024
-"""The largest trajectory file (CSV/YAML) ``follow_trajectory --file`` reads (4 MiB): about 140
+MAX_TRAJECTORY_FILE_BYTES: Final = 2 * 1024 * 1024
+"""The largest trajectory file (CSV/YAML) ``follow_trajectory --file`` reads (2 MiB): about 140
 bytes a row for ``MAX_TRAJECTORY_POINTS`` rows, more than a CSV row (~25 bytes) or a YAML point
 (~40 bytes) of the thesis's trajectories takes."""
-
 
 STREAM_DEPTH: Final = 500
 """Samples a stream's publisher keeps for re-sending, and a keeping subscriber queues: 2 s at
