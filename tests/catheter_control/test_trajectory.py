@@ -158,3 +158,18 @@ def test_the_contract_s_file_limit_refuses_a_huge_file_by_its_size(tmp_path: Pat
         fh.truncate(MAX_TRAJECTORY_FILE_BYTES + 1)
     with pytest.raises(SignalError, match=rf"{MAX_TRAJECTORY_FILE_BYTES + 1} bytes"):
         load_trajectory_file(path)
+
+
+def test_follow_trajectory_refuses_a_huge_file_before_anything_starts(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from catheter_control.follow_trajectory import EXIT_REFUSED, main
+
+    path = tmp_path / "huge.csv"
+    with path.open("wb") as fh:  # sparse, as the 10^7-row CSV that once took 66 s to parse
+        fh.write(b"t_s,angle_deg\n")
+        fh.truncate(MAX_TRAJECTORY_FILE_BYTES + 1)
+    assert main(["--file", str(path), "--out", str(tmp_path / "run")]) == EXIT_REFUSED
+    err = capsys.readouterr().err
+    assert "trajectory refused" in err and "MAX_TRAJECTORY_FILE_BYTES" in err, err
+    assert not (tmp_path / "run").exists()
