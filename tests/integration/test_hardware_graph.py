@@ -372,6 +372,29 @@ def _commands_received(probe: Probe, node: str) -> int:
     return count
 
 
+@pytest.mark.parametrize(
+    ("module", "param", "value", "range_text"),
+    [
+        ("catheter_driver.valve_driver_node", "watchdog_s", -1.0, "[0.01, 5]"),
+        ("catheter_driver.laser_angle_node", "rate_hz", -1.0, "[10, 5000]"),
+    ],
+)
+def test_driver_refuses_out_of_range_parameter_with_exit_2(
+    children: Children, module: str, param: str, value: float, range_text: str
+) -> None:
+    """A refused parameter is exit 2 with the reason, not a crash in the half-built node.
+
+    rclpy destroys a node whose constructor raised when its context shuts down; the valve
+    driver's destroy_node read attributes set after the parameters and turned the refusal
+    into an AttributeError and exit 1. No devices are needed: the refusal comes first.
+    """
+    run = children.run(module, node_argv(module, {param: value}), timeout_s=30.0)
+    output = run.stdout + run.stderr
+    assert run.returncode == 2, f"exit {run.returncode}:\n{output}"
+    assert param in output and range_text in output, output
+    assert "Traceback" not in output, output
+
+
 def test_drivers_match_sim_hardware(rig: RigProcess, children: Children, tmp_path: Path) -> None:
     # One graph after the other: both at once (on two domains) would take 20 s less, but on
     # this 2-core machine the emulated graph alone keeps one core busy (recorder, drivers and

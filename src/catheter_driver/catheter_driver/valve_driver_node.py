@@ -193,8 +193,13 @@ class ValveDriverNode(LifecycleNode):
         self._close("process exiting")
 
     def destroy_node(self) -> None:
-        """Stop the loops (which take the commands) before their helper node goes."""
-        for loop in self._loops:
+        """Stop the loops (which take the commands) before their helper node goes.
+
+        A constructor that refused a parameter has set neither ``_loops`` nor ``_commands``,
+        and rclpy still destroys the half-built node when its context shuts down: reading
+        them with getattr keeps that refusal an exit 2 with its reason, not an AttributeError.
+        """
+        for loop in getattr(self, "_loops", []):
             loop.stop()
         super().destroy_node()
         commands = getattr(self, "_commands", None)
