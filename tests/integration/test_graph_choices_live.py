@@ -2,7 +2,8 @@
 parameter types a node takes, and Ctrl-C during a run.
 
 - a second ``follow_trajectory --sim`` or ``bringup`` in a domain where the graph runs exits 2
-  naming the nodes and the domain, and leaves the running graph alone;
+  naming the nodes and the domain, and leaves the running graph alone; a graph started with
+  no look at all is refused by its lifecycle manager before any transition;
 - ``-p control_rate_hz:=1000`` (an integer) is the 1 kHz loop; a string exits 2 with one line;
 - ``bringup --compensator idrdpi`` runs the IDRDPI, and Ctrl-C stops it cleanly (exit 0);
 - ``follow_trajectory --sim --model-dir <the shipped IDRDPI>`` runs the IDRDPI without
@@ -70,7 +71,9 @@ def test_a_second_graph_in_a_busy_domain_is_refused_naming_the_first(
     assert _names_the_graph(second.stderr), second.stderr
     assert f"ROS_DOMAIN_ID={children.domain_id}" in second.stderr
     assert "Traceback" not in second.stderr
-    assert not run_dir.exists(), "a refused run started something"
+    # Refused by the look before anything started or, where a busy machine made the look
+    # miss the graph, by the lifecycle manager before any node was configured: no bag.
+    assert not list(run_dir.rglob("*.mcap")), "a refused run recorded something"
     again = children.run("bringup", [*BRINGUP, "--no-tf"], 90.0)
     assert again.returncode == 2, again.stdout + again.stderr
     assert _names_the_graph(again.stderr), again.stderr
@@ -78,6 +81,30 @@ def test_a_second_graph_in_a_busy_domain_is_refused_naming_the_first(
     # The running graph was not touched: nothing configured its nodes a second time.
     assert not graph.failed()
     assert children.log("compensator", "graph").count("compensator 'clstm' at") == 1
+
+
+def test_a_graph_started_without_a_look_is_refused_by_its_manager_before_any_transition(
+    children: Children,
+) -> None:
+    """The launchers' look can miss a graph on a busy machine; the manager must not."""
+    from catheter_control.bringup import ProcessGraph
+    from catheter_models.errors import GraphConflictError
+
+    first = children.graph(sim_graph_specs(None))
+    second = ProcessGraph(
+        sim_graph_specs(None), "/catheter", children.log_dir / "second", children.env
+    )
+    with pytest.raises(GraphConflictError) as refused:
+        second.start()  # no choose_domain here: only the manager stands in the way
+    said = str(refused.value)
+    assert "another graph already runs" in said
+    assert _names_the_graph(said), said
+    assert f"ROS_DOMAIN_ID={children.domain_id}" in said
+    assert all(proc.poll() is not None for proc in second.procs.values()), "left running"
+    # The first graph was never sent a transition: its nodes stay active, configured once.
+    assert not first.failed()
+    assert children.log("compensator", "graph").count("compensator 'clstm' at") == 1
+    assert "Unable to start transition" not in children.log("sim_hardware", "graph")
 
 
 def test_an_integer_for_the_rate_is_the_1_khz_loop_and_a_string_is_refused(

@@ -33,7 +33,7 @@ from catheter_control.tracking_report import RunRecord
 from catheter_control.trajectory import TrajectoryPlan
 from catheter_models.bag import load_bag
 from catheter_models.contract import CONTROL_RATE_HZ, SENSOR_RATE_HZ
-from catheter_models.errors import CatheterError
+from catheter_models.errors import CatheterError, GraphConflictError
 from catheter_models.geometry import Calibration
 from catheter_models.lab.signals import lab_spec
 from catheter_models.plant import PlantConfig
@@ -199,6 +199,9 @@ class CommissionRig:
         graph = ProcessGraph(specs, choice.namespace, log_dir=self.log_dir)
         try:
             graph.start()
+        except GraphConflictError:
+            self.stop()
+            raise  # a refusal (commission exits 2), not a rig that failed to come up
         except CatheterError as exc:
             self.stop()
             raise RigError(f"the rig did not come up: {exc}") from exc

@@ -51,7 +51,7 @@ from catheter_control.trajectory import (
     with_lead_in,
 )
 from catheter_models.contract import CONTROL_RATE_HZ, DEFAULT_NAMESPACE
-from catheter_models.errors import CatheterError, ParameterError
+from catheter_models.errors import CatheterError, GraphConflictError, ParameterError
 from catheter_models.signals import TEST_TRAJECTORIES, get_preset
 
 if TYPE_CHECKING:
@@ -176,6 +176,9 @@ def main(argv: list[str] | None = None) -> int:
             local = start_local_graph(
                 args, run_dir, bag_path, trajectory.name, trajectory.signal_params
             )
+        except GraphConflictError as exc:
+            print(f"follow_trajectory: {exc}", file=sys.stderr)
+            return EXIT_REFUSED
         except LocalGraphError as exc:
             print(f"follow_trajectory: {exc}", file=sys.stderr)
             return EXIT_GRAPH

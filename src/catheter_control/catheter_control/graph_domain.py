@@ -16,11 +16,9 @@ import random
 import time
 from collections.abc import Sequence
 
-from catheter_models.errors import CatheterError
+from catheter_models.errors import GraphConflictError
 
-
-class GraphConflictError(CatheterError):
-    """Another graph already runs in the namespace and domain a new one would start in."""
+__all__ = ["GraphConflictError", "choose_domain", "domain_id_argument", "nodes_in_domain"]
 
 
 DISCOVERY_WAIT_S = 2.0

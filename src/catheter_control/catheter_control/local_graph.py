@@ -24,7 +24,7 @@ from catheter_control.bringup import (
 )
 from catheter_control.graph_domain import choose_domain
 from catheter_control.models import SHIPPED, resolve_compensator, resolve_feedback
-from catheter_models.errors import CatheterError
+from catheter_models.errors import CatheterError, GraphConflictError
 from catheter_models.geometry import Calibration
 from catheter_models.plant import PlantConfig
 
@@ -157,6 +157,8 @@ def start_local_graph(
         # rig process outlived follow_trajectory and held its output pipe open.
         if devices is not None:
             devices.stop()
+        if isinstance(exc, GraphConflictError):
+            raise  # a refusal: nothing of this run moved, and the other graph is left alone
         if isinstance(exc, CatheterError):
             raise LocalGraphError(str(exc)) from exc
         raise

@@ -19,6 +19,14 @@ class SignalError(CatheterError, ValueError):
     """A signal or trajectory cannot be generated or is not physically possible."""
 
 
+class GraphConflictError(CatheterError):
+    """Another graph already runs in the ROS namespace and domain a new one would start in.
+
+    Raised before anything starts where a launcher's look sees it, and by the lifecycle
+    manager where only the duplicate node names or their states show it.
+    """
+
+
 class BagError(CatheterError):
     """A bag cannot be read as the interface contract requires."""
 

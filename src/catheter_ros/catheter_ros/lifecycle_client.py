@@ -26,7 +26,7 @@ from rclpy.executors import Executor, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
-from catheter_models.errors import CatheterError
+from catheter_models.errors import CatheterError, GraphConflictError
 
 CONFIGURE = Transition.TRANSITION_CONFIGURE
 ACTIVATE = Transition.TRANSITION_ACTIVATE
@@ -40,6 +40,12 @@ TRANSITION_WAIT_S = 60.0
 """How long one transition may take (configure loads and hash-checks a model)."""
 REASON_WAIT_S = 2.5
 """How long to wait for a failed node's /diagnostics status (published at 1 Hz)."""
+ALONE_LOOK_S = 3.0
+"""How long the manager has looked at the graph before it checks that the nodes it is about to
+configure are the only ones of their names. Launchers look for another graph before they start
+(catheter_control.graph_domain), but on a busy 2-core machine that 2 s look once missed a whole
+running graph; by the time our own nodes offer their services the manager has usually watched
+for far longer, and this floor covers a composed graph that comes up at once."""
 
 
 class LifecycleError(CatheterError):
@@ -76,6 +82,7 @@ class LifecycleManager(Node):
             name: self.create_client(GetState, f"{name}/get_state") for name in managed
         }
         self._status: dict[str, tuple[int, str]] = {}
+        self._born_s = time.monotonic()
         self.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 50)
         self.active: list[str] = []
 
@@ -91,6 +98,47 @@ class LifecycleManager(Node):
             executor.spin_once(timeout_sec=0.05)
         return True
 
+    def _wait_for_services(self, executor: Executor, name: str, label: str) -> None:
+        """Wait until ``name``'s lifecycle services are up; LifecycleError if it exits first."""
+        client = self._change_state[name]
+        getter = self._get_state[name]
+        gone: list[str] = []
+
+        def ready() -> bool:
+            reason = self.is_gone(name)
+            if reason and not gone:
+                gone.append(reason)
+            return bool(gone) or (client.service_is_ready() and getter.service_is_ready())
+
+        if not self._spin(executor, ready, SERVICE_WAIT_S) or gone:
+            why = gone[0] if gone else f"no {client.srv_name} service after {SERVICE_WAIT_S:g} s"
+            raise LifecycleError(f"{name}: cannot {label}: {why}")
+
+    def _refuse_another_graph(self, executor: Executor) -> None:
+        """LifecycleError if a managed name is taken twice or is not ``unconfigured``."""
+        end_s = self._born_s + ALONE_LOOK_S
+        while time.monotonic() < end_s:
+            executor.spin_once(timeout_sec=0.05)
+        seen = [f"{ns.rstrip('/')}/{node}" for node, ns in self.get_node_names_and_namespaces()]
+        domain = f"ROS_DOMAIN_ID={self.context.get_domain_id()}"
+        twice = [name for name in self.managed if seen.count(name) > 1]
+        if twice:
+            raise GraphConflictError(
+                f"another graph already runs in this ROS domain ({domain}): "
+                f"{', '.join(twice)} {'are' if len(twice) > 1 else 'is'} there twice (or one "
+                "killed in the last few seconds still shows); its nodes would answer this "
+                "graph's transitions, so none was configured. Stop it, or start this graph in "
+                "another domain (--domain-id auto)"
+            )
+        for name in self.managed:
+            state = self.state_of(executor, name)
+            if state and state != "unconfigured":
+                raise GraphConflictError(
+                    f"another graph already runs in this ROS domain ({domain}): {name} "
+                    f"answers as {state!r}, not as a node just started; none was configured. "
+                    "Stop that graph, or start this one in another domain (--domain-id auto)"
+                )
+
     def change_state(self, executor: Executor, name: str, transition: int) -> None:
         """Run one transition of node ``name``; raise LifecycleError naming it and why not."""
         label = _LABELS[transition]
@@ -103,12 +151,7 @@ class LifecycleManager(Node):
                 gone.append(reason)
             return bool(gone)
 
-        def ready() -> bool:
-            return is_gone() or client.service_is_ready()
-
-        if not self._spin(executor, ready, SERVICE_WAIT_S) or gone:
-            why = gone[0] if gone else f"no {client.srv_name} service after {SERVICE_WAIT_S:g} s"
-            raise LifecycleError(f"{name}: cannot {label}: {why}")
+        self._wait_for_services(executor, name, label)
         request = ChangeState.Request()
         request.transition.id = transition
         self._status.pop(name.lstrip("/"), None)  # a status from after the answer says why
@@ -135,7 +178,16 @@ class LifecycleManager(Node):
         return self._status[key][1]
 
     def bring_up(self, executor: Executor) -> None:
-        """Configure every managed node, then activate each, in order (raises LifecycleError)."""
+        """Configure every managed node, then activate each, in order (raises LifecycleError).
+
+        Before the first transition, every node's services must be up and each name must be
+        the only one of its kind in the domain, in state ``unconfigured``: a node of another
+        graph answers the same ``change_state`` service, and configuring or activating it
+        would make two graphs command each other's catheter.
+        """
+        for name in self.managed:
+            self._wait_for_services(executor, name, _LABELS[CONFIGURE])
+        self._refuse_another_graph(executor)
         for name in self.managed:
             self.change_state(executor, name, CONFIGURE)
         for name in self.managed:
