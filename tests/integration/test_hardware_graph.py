@@ -463,7 +463,10 @@ def test_drivers_match_sim_hardware(rig: RigProcess, children: Children, tmp_pat
     assert run.returncode == 0, f"exit {run.returncode}\n{run.stdout}\n{run.stderr}"
     report = json.loads((tmp_path / "run" / "report.json").read_text())
     codes = emu.stop(timeout_s=15.0)
-    assert codes == {"compensator": 0, "laser_angle": 0, "valve_driver": 0, "recorder": 0}, codes
+    assert codes == {"compensator": 0, "laser_angle": 0, "valve_driver": 0, "recorder": 0}, (
+        f"{codes}\n"
+        + "\n".join(f"--- {n} ---\n{children.log(n, 'emu')[-3000:]}" for n in codes if codes[n])
+    )
     t3 = time.monotonic()
     print(f"sim {t1 - t0:.1f} s, emulated {t2 - t1:.1f} s, follow_trajectory {t3 - t2:.1f} s")
 
