@@ -39,6 +39,10 @@ from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
 SUPPORT = REPO / "tests" / "support"
+sys.path.insert(0, str(SUPPORT))
+
+from foreign_plants import pythonpath_with_support  # noqa: E402
+
 RESULTS = REPO / "bench" / "results" / "commission.json"
 TARGET_RMSE_DEG = 0.3
 TRAJECTORIES = (
@@ -75,9 +79,7 @@ def run_one(plant: str, out: Path, domain_id: int, args: argparse.Namespace) -> 
         **os.environ,
         "ROS_DOMAIN_ID": str(domain_id),
         "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
-        "PYTHONPATH": os.pathsep.join(
-            [str(SUPPORT), *filter(None, [os.environ.get("PYTHONPATH")])]
-        ),
+        "PYTHONPATH": pythonpath_with_support(),
     }
     argv = [
         sys.executable,

@@ -8,11 +8,11 @@ trajectory keep it to a few minutes; docs/benchmarks.md has the full runs.
 from __future__ import annotations
 
 import json
-import os
 import sys
 from pathlib import Path
 
 import pytest
+from foreign_plants import pythonpath_with_support
 from graph_utils import Children
 
 from catheter_control.commission import (
@@ -25,16 +25,12 @@ from catheter_control.commission import (
 
 pytestmark = pytest.mark.slow
 
-_SUPPORT = Path(__file__).resolve().parents[1] / "support"
-
 
 def _commission(
     children: Children, name: str, out: Path, *extra: str, timeout_s: float
 ) -> tuple[int, str, str]:
     # The node processes import a plant by its module path: tests/support must be on theirs.
-    children.env["PYTHONPATH"] = os.pathsep.join(
-        [str(_SUPPORT), *filter(None, [os.environ.get("PYTHONPATH")])]
-    )
+    children.env["PYTHONPATH"] = pythonpath_with_support()
     argv = [
         sys.executable,
         "-m",

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from foreign_plants import pythonpath_with_support
 from graph_utils import Children, Probe, diagnostic_values, gauge_pa, node_argv, statuses
 from lifecycle_msgs.msg import TransitionEvent
 from sensor_msgs.msg import FluidPressure, JointState, Range
@@ -51,7 +52,6 @@ pytestmark = [
     pytest.mark.filterwarnings("ignore:module 'sre_:DeprecationWarning"),
 ]
 
-SUPPORT = Path(__file__).resolve().parents[1] / "support"
 SIM = "catheter/sim_hardware"
 PERIOD_S = 1.0 / 250.0  # the plugin's rate_hz
 STRAIGHT_DISTANCE_M = float(PlantConfig.thesis_rig().rig["straight_distance_m"])
@@ -102,9 +102,7 @@ def make():
 
 
 def _support_on_pythonpath(env: dict[str, str]) -> dict[str, str]:
-    env["PYTHONPATH"] = os.pathsep.join(
-        [str(SUPPORT), *filter(None, [os.environ.get("PYTHONPATH")])]
-    )
+    env["PYTHONPATH"] = pythonpath_with_support()
     return env
 
 

@@ -8,9 +8,29 @@ physics for every effect it can hide; :mod:`.base` holds the contract they share
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 from .base import CATALOGUE, OUTSIDE, RANGES, Effect, ForeignPlant
 
-__all__ = ["CATALOGUE", "OUTSIDE", "PLANTS", "RANGES", "Effect", "ForeignPlant"]
+__all__ = [
+    "CATALOGUE",
+    "OUTSIDE",
+    "PLANTS",
+    "RANGES",
+    "Effect",
+    "ForeignPlant",
+    "pythonpath_with_support",
+]
+
+SUPPORT_DIR = Path(__file__).resolve().parents[1]
+"""tests/support: the directory that makes ``foreign_plants`` importable."""
+
+
+def pythonpath_with_support() -> str:
+    """This process's PYTHONPATH with tests/support first, for processes that load a plant
+    by its module path (``--plant foreign_plants.plugin:boucwen``)."""
+    return os.pathsep.join([str(SUPPORT_DIR), *filter(None, [os.environ.get("PYTHONPATH")])])
 
 
 def _plants() -> dict[str, type[ForeignPlant]]:
