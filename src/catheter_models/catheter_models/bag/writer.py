@@ -10,15 +10,26 @@ A recorder on the rig gets killed (kill -9, power, a hung driver). To lose at mo
 ``flush_period_s`` of data, the recorder finalizes the open MCAP chunk, flushes the file and
 rewrites ``metadata.yaml`` (atomically) at that period. A killed recording then has every
 flushed chunk intact but no MCAP footer; ``catheter-lab bag repair`` recovers it.
+
+A recorder that cannot write (the disk is full, an I/O error) stops at the first failure with
+a :class:`BagWriteError` naming the error, the file and the time (:class:`WriteFailure`), and
+writes nothing more: ``close`` then cuts the file back to its last complete flush, so it is
+exactly what a killed recording leaves (every flushed chunk, no footer; ``bag repair``
+recovers it), and ``metadata.yaml`` counts what that holds. A partly written chunk after it
+would make the file unreadable past it, and a footer after a failed write cannot be trusted.
+``close`` says which it left: :class:`CloseOutcome`.
 """
 
 from __future__ import annotations
 
+import contextlib
+import datetime as dt
+import errno as errno_codes
 import os
 import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from types import TracebackType
 from typing import IO, Any, Final, Literal, NamedTuple
@@ -103,6 +114,77 @@ class _LogExtent:
         self.last_ns = log_time_ns if self.last_ns is None else max(self.last_ns, log_time_ns)
 
 
+@dataclass(frozen=True)
+class WriteFailure:
+    """Why a bag stopped being written: the error, the file, and when.
+
+    Attributes:
+        path: The file the write failed on.
+        operation: What was being done: ``write``, ``flush`` or ``close``.
+        errno: The OS error number (``errno.ENOSPC``), or None for an error that is not the
+            OS's (a bug, a closed stream).
+        reason: The error as a person reads it (``No space left on device``).
+        at_ns: When it failed: wall clock [ns since the Unix epoch].
+    """
+
+    path: Path
+    operation: str
+    errno: int | None
+    reason: str
+    at_ns: int
+
+    @classmethod
+    def of(cls, path: Path, operation: str, exc: BaseException) -> WriteFailure:
+        """The failure ``exc`` raised while doing ``operation`` on ``path``, timed now."""
+        if isinstance(exc, OSError) and exc.errno is not None:
+            reason = exc.strerror or str(exc)
+            return cls(path, operation, exc.errno, reason, time.time_ns())
+        return cls(path, operation, None, repr(exc), time.time_ns())
+
+    @property
+    def errno_name(self) -> str:
+        """``ENOSPC``; '' when the error is not the OS's."""
+        if self.errno is None:
+            return ""
+        return errno_codes.errorcode.get(self.errno, str(self.errno))
+
+    def describe(self) -> str:
+        """``No space left on device (ENOSPC) on flush of /x/bag_0.mcap at 12:00:01.250``."""
+        when = dt.datetime.fromtimestamp(self.at_ns / NS_PER_S).isoformat(timespec="milliseconds")
+        code = f" ({self.errno_name})" if self.errno_name else ""
+        return f"{self.reason}{code} on {self.operation} of {self.path} at {when}"
+
+
+class BagWriteError(BagError):
+    """The bag could not be written (disk full, I/O error); ``failure`` says why and when."""
+
+    def __init__(self, failure: WriteFailure) -> None:
+        super().__init__(f"cannot write bag: {failure.describe()}")
+        self.failure = failure
+
+
+@dataclass(frozen=True)
+class CloseOutcome:
+    """What a closed bag holds, and whether any MCAP reader opens it as it is.
+
+    Attributes:
+        finished: True: summary and footer written, the bag is complete. False: the file
+            ends at its last complete flush with no footer (a write failed); ``catheter-lab
+            bag repair`` recovers every message it holds.
+        messages: Messages the file holds (all written when finished, else up to the last
+            complete flush).
+        until_ns: Log time of the newest message it holds [ns, epoch]; None if none.
+        failure: Why writing stopped (None for a bag closed as planned).
+        note: One line for a person: what the file is and what to do with it.
+    """
+
+    finished: bool
+    messages: int
+    until_ns: int | None
+    failure: WriteFailure | None
+    note: str
+
+
 @dataclass
 class _FlushState:
     """When the last flush happened: log time [ns, epoch] and wall clock [s]."""
@@ -185,6 +267,8 @@ class BagRecorder:
         self._extent = _LogExtent()
         self._flushed = _FlushState(log_ns=None, wall_s=clock())
         self._closed = False
+        self._failure: WriteFailure | None = None
+        self._outcome: CloseOutcome | None = None
 
         self._stream: IO[bytes] = self.mcap_path.open("xb")
         self._writer = Writer(
@@ -194,6 +278,10 @@ class BagRecorder:
         )
         self._writer.start(profile=Profile.ROS2, library=LIBRARY)
         self._stream.flush()
+        self._good_offset = self._stream.tell()
+        """Where the file's last complete flush ends [bytes]: a failed write cuts back to it."""
+        self._good_summary = self._summary()
+        """What the file holds up to ``_good_offset`` (``metadata.yaml`` after a failure)."""
         # A provisional metadata.yaml from the start: even a recording killed before its first
         # flush is a directory that tools recognise as a bag and can repair.
         write_metadata(self.path, self._summary(), fsync=fsync)
@@ -221,6 +309,16 @@ class BagRecorder:
         return self._closed
 
     @property
+    def failure(self) -> WriteFailure | None:
+        """Why writing stopped (disk full, I/O error); None while the bag writes."""
+        return self._failure
+
+    @property
+    def outcome(self) -> CloseOutcome | None:
+        """What ``close`` left (None before it ran)."""
+        return self._outcome
+
+    @property
     def message_count(self) -> int:
         """Messages written so far, over all topics."""
         with self._lock:
@@ -241,7 +339,9 @@ class BagRecorder:
         """
         self._check_custom(key, value)
         with self._lock:
-            self._check_open()
+            # Also after a failed write: close() puts it into metadata.yaml if the disk lets it.
+            if self._closed:
+                self._check_open()
             self._custom_data[key] = value
 
     def add_topic(
@@ -320,6 +420,8 @@ class BagRecorder:
             publish_time_ns: Publish (send) time [ns, epoch]; the log time if unknown.
 
         Raises:
+            BagWriteError: The file could not be written (disk full, I/O error), now or
+                before; nothing more is written after the first failure.
             BagError: The topic was not added, or the bag is closed.
         """
         with self._lock:
@@ -331,12 +433,16 @@ class BagRecorder:
                     f"(added: {sorted(self._topics) or 'none'})"
                 )
                 raise BagError(msg)
-            self._writer.add_message(
-                channel_id=entry.channel_id,
-                log_time=int(log_time_ns),
-                data=serialized_cdr,
-                publish_time=int(publish_time_ns),
-            )
+            try:
+                # A chunk that fills up is written out here, so this can meet the disk too.
+                self._writer.add_message(
+                    channel_id=entry.channel_id,
+                    log_time=int(log_time_ns),
+                    data=serialized_cdr,
+                    publish_time=int(publish_time_ns),
+                )
+            except OSError as exc:
+                raise self._fail("write", exc) from exc
             entry.message_count += 1
             self._extent.add(int(log_time_ns))
             if self._flush_due(int(log_time_ns)):
@@ -346,33 +452,48 @@ class BagRecorder:
         """Finalize the open chunk, flush the file and rewrite ``metadata.yaml`` now.
 
         Raises:
+            BagWriteError: The file could not be written, now or before.
             BagError: The bag is closed.
         """
         with self._lock:
             self._check_open()
             self._flush_locked()
 
-    def close(self) -> None:
+    def close(self) -> CloseOutcome:
         """Finish the MCAP file (summary and footer) and write the final ``metadata.yaml``.
 
-        Safe to call more than once; later calls do nothing.
+        After a failed write (or if finishing fails) the file is cut back to its last complete
+        flush instead, which ``catheter-lab bag repair`` recovers, and ``metadata.yaml``
+        counts what it holds. Never raises for the disk: what it left is the outcome.
+        Safe to call more than once; later calls return the same outcome.
         """
         with self._lock:
-            if self._closed:
-                return
+            if self._outcome is not None:
+                return self._outcome
             # Marked first so a failure below (disk full) is not retried on a broken writer.
             self._closed = True
-            try:
-                self._writer.add_metadata(
-                    "rosbag2", {"serialized_metadata": self._summary_yaml_body()}
-                )
-                self._writer.finish()
-                self._stream.flush()
-                if self._fsync:
-                    os.fsync(self._stream.fileno())
-            finally:
-                self._stream.close()
-            write_metadata(self.path, self._summary(), fsync=self._fsync)
+            if self._failure is None:
+                try:
+                    self._finish_locked()
+                except OSError as exc:
+                    self._failure = WriteFailure.of(self.mcap_path, "close", exc)
+                else:
+                    summary = self._summary()
+                    note = f"{self.path}: finished, {summary.message_count} messages"
+                    try:
+                        write_metadata(self.path, summary, fsync=self._fsync)
+                    except OSError as exc:
+                        # The MCAP file is whole and carries its own copy of the summary.
+                        note += (
+                            f"; metadata.yaml is its last flush's ({exc.strerror}), the "
+                            "summary inside the .mcap file is complete"
+                        )
+                    self._outcome = CloseOutcome(
+                        True, summary.message_count, self._extent.last_ns, None, note
+                    )
+                    return self._outcome
+            self._outcome = self._cut_back_locked(self._failure)
+            return self._outcome
 
     # -- internals ----------------------------------------------------------------------------
 
@@ -386,9 +507,67 @@ class BagRecorder:
             raise TypeError(msg)
 
     def _check_open(self) -> None:
+        if self._failure is not None:
+            raise BagWriteError(self._failure)
         if self._closed:
             msg = f"bag {self.path} is closed; open a new BagRecorder to record more"
             raise BagError(msg)
+
+    def _fail(self, operation: str, exc: OSError) -> BagWriteError:
+        """Remember the first failure (nothing more is written) and the error to raise."""
+        if self._failure is None:
+            self._failure = WriteFailure.of(self.mcap_path, operation, exc)
+        return BagWriteError(self._failure)
+
+    def _finish_locked(self) -> None:
+        try:
+            self._writer.add_metadata("rosbag2", {"serialized_metadata": self._summary_yaml_body()})
+            self._writer.finish()
+            self._stream.flush()
+            if self._fsync:
+                os.fsync(self._stream.fileno())
+        finally:
+            self._stream.close()
+
+    def _cut_back_locked(self, failure: WriteFailure) -> CloseOutcome:
+        """Leave the file as its last complete flush left it, and say what it holds.
+
+        The stream is closed first (its buffer may still try to write), then the file is
+        truncated to the flush's end, so nothing half-written stays after the last whole
+        chunk. metadata.yaml, as that flush wrote it, already counts what the file holds; it
+        is rewritten with the custom_data set since (the loss counts) if the disk takes it.
+        """
+        problems = []
+        with contextlib.suppress(OSError):  # the buffered bytes are past the cut anyway
+            self._stream.close()
+        try:
+            os.truncate(self.mcap_path, self._good_offset)
+        except OSError as exc:
+            problems.append(f"could not cut it back to its last flush ({exc.strerror})")
+        kept = self._good_summary
+        try:
+            write_metadata(
+                self.path, replace(kept, custom_data=dict(self._custom_data)), fsync=self._fsync
+            )
+        except OSError as exc:
+            problems.append(
+                f"metadata.yaml keeps its last flush's custom_data ({exc.strerror}): the "
+                "recorder's loss counts are not in it"
+            )
+        until_ns = kept.end_time_ns if kept.message_count else None
+        when = (
+            "nothing"
+            if until_ns is None
+            else f"{kept.message_count} messages up to "
+            + dt.datetime.fromtimestamp(until_ns / NS_PER_S).isoformat(timespec="milliseconds")
+        )
+        note = (
+            f"{self.path}: not finished ({failure.describe()}); it holds {when} (its last "
+            f"complete flush) with no footer: `catheter-lab bag repair {self.path}` recovers it"
+        )
+        if problems:
+            note += "; " + "; ".join(problems)
+        return CloseOutcome(False, kept.message_count, until_ns, failure, note)
 
     @staticmethod
     def _kilted_schema(msgtype: str) -> tuple[SchemaText, str]:
@@ -413,13 +592,22 @@ class BagRecorder:
         )
 
     def _flush_locked(self) -> None:
-        self._writer.flush()
-        if self._fsync:
-            os.fsync(self._stream.fileno())
+        try:
+            self._writer.flush()
+            if self._fsync:
+                os.fsync(self._stream.fileno())
+        except OSError as exc:
+            raise self._fail("flush", exc) from exc
+        self._good_offset = self._stream.tell()
+        self._good_summary = self._summary()
         self._flushed.log_ns = self._extent.last_ns
         self._flushed.wall_s = self._clock()
         # Only after the data is out: the counts in metadata.yaml never exceed the file's.
-        write_metadata(self.path, self._summary(), fsync=self._fsync)
+        try:
+            write_metadata(self.path, self._good_summary, fsync=self._fsync)
+        except OSError as exc:
+            # The data is whole up to here; a disk that refuses 5 kB refuses the next chunk.
+            raise self._fail("flush", exc) from exc
 
     def _summary(self) -> BagSummary:
         return BagSummary(
