@@ -8,7 +8,7 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(exclude=["test", "tests"]),
-    package_data={PACKAGE: ["py.typed"]},
+    package_data={PACKAGE: ["py.typed", "fastdds_loopback.xml"]},
     data_files=[
         # The ament resource marker and package.xml are what ament_index_python looks for.
         ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),

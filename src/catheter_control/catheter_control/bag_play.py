@@ -124,6 +124,7 @@ def main(argv: list[str] | None = None) -> int:
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
+    from catheter_ros.dds_profile import use_loopback_profile
     from catheter_ros.messages import message_class
     from catheter_ros.node_main import install_stop_handlers
 
@@ -147,6 +148,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"bag_play: {exc}", file=sys.stderr)
         return EXIT_REFUSED
     stop = install_stop_handlers()
+    use_loopback_profile()
     rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     try:
         node = rclpy.create_node("bag_play")

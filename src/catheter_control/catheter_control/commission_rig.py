@@ -221,10 +221,13 @@ class CommissionRig:
         import rclpy
         from rclpy.node import Node
 
+        from catheter_ros.dds_profile import use_loopback_profile
+
         ns = self.choice.namespace.rstrip("/")
         sensors = [f"{ns}/pressure/measured", f"{ns}/tip/angle"]
         command = f"{ns}/pressure/command"
         start = time.monotonic()
+        use_loopback_profile()
         with rclpy.init(args=["commission"]):
             node = Node("commission_probe")
             topics: set[str] = set()

@@ -59,6 +59,9 @@ def nodes_in_domain(domain_id: int, wait_s: float = DISCOVERY_WAIT_S) -> list[st
     from rclpy.node import Node
     from rclpy.signals import SignalHandlerOptions
 
+    from catheter_ros.dds_profile import use_loopback_profile
+
+    use_loopback_profile()
     probe = f"_catheter_graph_probe_{os.getpid()}"
     context = Context()
     rclpy.init(

@@ -46,6 +46,7 @@ from catheter_models.contract import (
 from catheter_models.errors import CatheterError
 from catheter_models.units import NS_PER_S, s_to_ns
 from catheter_ros import qos
+from catheter_ros.dds_profile import use_loopback_profile
 from catheter_ros.messages import angle_rad_from, ns_from_time
 
 _START_TIMEOUT_S = 8.0
@@ -112,6 +113,7 @@ def follow(
     """
     record = RunRecord()
     interrupt = interrupt or threading.Event()
+    use_loopback_profile()
     with rclpy.init(
         args=["follow_trajectory", "--ros-args", "-r", f"__ns:={namespace}", *ros_args],
         # The caller's handler turns SIGINT into ``interrupt``: rclpy's would raise

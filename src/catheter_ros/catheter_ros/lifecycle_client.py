@@ -27,6 +27,7 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 from catheter_models.errors import CatheterError, GraphConflictError
+from catheter_ros.dds_profile import use_loopback_profile
 
 CONFIGURE = Transition.TRANSITION_CONFIGURE
 ACTIVATE = Transition.TRANSITION_ACTIVATE
@@ -254,7 +255,9 @@ class ManagerContext:
         env: Mapping[str, str],
         is_gone: Callable[[str], str | None],
     ) -> None:
-        keys = ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")
+        keys = ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "FASTDDS_DEFAULT_PROFILES_FILE")
+        env = dict(env)
+        use_loopback_profile(env)  # the nodes' own choice (node_main), for this participant
         saved = {k: os.environ.get(k) for k in keys}
         self.context = Context()
         try:

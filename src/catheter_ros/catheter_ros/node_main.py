@@ -24,6 +24,7 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 from catheter_models.errors import CatheterError
+from catheter_ros.dds_profile import use_loopback_profile
 from catheter_ros.params import refuse_undeclared_overrides
 
 
@@ -90,6 +91,7 @@ def run_nodes(
     """
     stop = install_stop_handlers()
     sys.setswitchinterval(_SWITCH_INTERVAL_S)
+    use_loopback_profile()  # under LOCALHOST, the node's sockets on 127.0.0.1 only
     nodes: list[Node] = []
     with rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO):
         executor: Executor = EventsExecutor() if events_executor else SingleThreadedExecutor()
