@@ -18,10 +18,24 @@ a slow disk) makes the recorder drop and count, not grow until the machine swaps
 the writer goes on for ``close_timeout_s`` at most, so the bag is always finished with its
 summary before a launcher's SIGKILL; what it could not write is counted as lost
 (``dropped_by_recorder`` in ``custom_data``).
+
+A writer that cannot write (the disk is full, an I/O error, any exception in the writer
+thread) stops recording at once, and the graph sees it at once: the recorder publishes
+``/diagnostics`` ERROR right then (and every second after) with the reason (the OS's error,
+its errno name, the file, when), ``state: failed``, until when the bag holds data
+(``recorded_until_ns``) and whether the file is ``finished`` or ``repairable``. The bag is
+closed there and then: after a failed write the file is cut back to its last complete flush
+(``catheter-lab bag repair`` recovers it; see ``catheter_models.bag.writer``), after any other
+error it is finished. From then on every message that arrives is counted per topic as not
+written (``not_written``, and in ``lost``), never queued. The recorder is not a lifecycle node
+(it starts first and stops last so the bag spans the graph's whole life), so ``failed`` is
+its state on /diagnostics; it stays up to keep saying so, and ``follow_trajectory`` and
+``commission`` stop their run on it.
 """
 
 from __future__ import annotations
 
+import datetime as dt
 import json
 import threading
 from collections import deque
@@ -34,9 +48,11 @@ from rclpy.subscription import Subscription
 
 from catheter_models import __version__
 from catheter_models.bag import LATCHED_QOS, STREAM_QOS, BagRecorder
+from catheter_models.bag.writer import BagWriteError, CloseOutcome, WriteFailure
 from catheter_models.contract import RECORDED_TOPICS, TRAJECTORY, TopicSpec
 from catheter_models.errors import ParameterError
 from catheter_models.gaps import StreamGaps, header_stamp_ns, pauses_between_runs
+from catheter_models.units import NS_PER_S
 from catheter_ros import diagnostics, qos
 from catheter_ros.messages import message_class
 from catheter_ros.node_main import run_node_as_main
@@ -128,6 +144,14 @@ class RecorderNode(Node):
         """Dropped at intake: topic, header stamp, arrival number. The gap count takes them
         in arrival order among the written ones: a stamp noted late reads as a gap first."""
         self._intake_open = True
+        self.not_written: dict[str, int] = {}
+        """Per topic: messages that arrived after the writer failed (never queued)."""
+        self.failure: WriteFailure | None = None
+        """Why the writer stopped (None while it records): set once, by the writer thread."""
+        self.outcome: CloseOutcome | None = None
+        """What the bag file holds after a failure (None before one, or before the close)."""
+        self._diag_lock = threading.Lock()
+        """The writer thread publishes the failure at once, the timer every second."""
         self._subscriptions_by_topic: dict[str, Subscription[Any]] = {}
         self._specs: dict[str, TopicSpec] = {}
         self._best_effort: set[str] = set()
@@ -168,6 +192,7 @@ class RecorderNode(Node):
         )
         self.counts[topic] = 0
         self.dropped[topic] = 0
+        self.not_written[topic] = 0
         self._specs[topic] = spec
         if not latched:
             self.gaps[topic] = StreamGaps(pauses=pauses_between_runs(spec.name))
@@ -178,10 +203,14 @@ class RecorderNode(Node):
         clock = self.get_clock()
         dropped = self.dropped
         dropped_stamps = self._dropped_stamps
+        not_written = self.not_written
 
         def on_message(data: bytes) -> None:
             if not self._intake_open:
                 return  # arrived after the stop: not part of the recording
+            if self.failure is not None:
+                not_written[topic] += 1  # the bag is closed: counted, not queued
+                return
             arrival = self._arrived
             self._arrived = arrival + 1
             if len(queue) >= self.max_queue:
@@ -227,9 +256,48 @@ class RecorderNode(Node):
                 if stopping:
                     return
                 self._stop.wait(_DRAIN_S)
-        except BaseException as exc:  # reported on /diagnostics; the bag keeps what it has
+        except BaseException as exc:  # any error: stop, close the bag, say so
             self._writer_error = exc
-            raise
+            self._writer_failed(exc)
+
+    def _writer_failed(self, exc: BaseException) -> None:
+        """Stop recording: count what is left, close the bag, say why at once (writer thread).
+
+        The bag is closed here, not at shutdown: what was written must be readable however
+        the process ends, and a writer that failed once cannot be trusted with more.
+        """
+        writer = self.writer
+        if isinstance(exc, BagWriteError):
+            failure = exc.failure
+        else:
+            failure = writer.failure or WriteFailure.of(writer.mcap_path, "write", exc)
+        self.failure = failure  # from here intake counts, never queues
+        while self._queue:
+            topic, _data, _now_ns, _arrival = self._queue.popleft()
+            self.not_written[topic] += 1
+        self._note_dropped()
+        writer.set_custom_data("recording_failed", failure.describe())
+        self._store_losses()
+        self.outcome = writer.close()
+        log = self.get_logger()
+        if not isinstance(exc, BagWriteError | OSError):
+            log.error(f"bag writer thread died: {exc!r}")  # a bug: its type says where
+        log.error(self._failure_text())
+        try:
+            self._publish_status()  # at once; the timer repeats it every second
+        except Exception as publish_error:  # a context going down at shutdown
+            log.warning(f"could not publish the failure on /diagnostics: {publish_error!r}")
+
+    def _failure_text(self) -> str:
+        """One line: why the recorder stopped, what the file holds, what it did not write."""
+        failure, outcome = self.failure, self.outcome
+        if failure is None:
+            return ""
+        text = f"not recording: {failure.describe()}"
+        if outcome is not None:
+            text += f"; {outcome.note}"
+        unwritten = sum(self.not_written.values())
+        return text + f"; {unwritten} messages since not written"
 
     def _drain(self) -> None:
         queue = self._queue
@@ -275,8 +343,9 @@ class RecorderNode(Node):
         return {
             topic: {
                 "samples": self.counts[topic],
-                "lost": g.lost + self.dropped[topic],
+                "lost": g.lost + self.dropped[topic] + self.not_written[topic],
                 "dropped_by_recorder": self.dropped[topic],
+                "not_written": self.not_written[topic],
                 "gaps": g.gap_count,
                 "longest_gap_s": round(g.longest_s, 4),
                 "period_s": None if g.period_s is None else round(g.period_s, 6),
@@ -293,14 +362,31 @@ class RecorderNode(Node):
         self.writer.set_custom_data(
             "dropped_by_recorder", json.dumps({t: n for t, n in self.dropped.items() if n})
         )
+        if self.failure is not None:
+            self.writer.set_custom_data(
+                "not_written", json.dumps({t: n for t, n in self.not_written.items() if n})
+            )
 
     def _publish_diagnostics(self) -> None:
         self._adapt_qos()
         if not self.writer.closed:
             self._store_losses()
+        self._publish_status()
+
+    def _publish_status(self) -> None:
+        """The recorder's /diagnostics status (executor thread, or the writer's at a failure)."""
+        with self._diag_lock:
+            level, message, values = self.status()
+            diagnostics.publish_status(
+                self._pub_diag, self, level=level, message=message, values=values
+            )
+
+    def status(self) -> tuple[bytes, str, dict[str, object]]:
+        """Level, message and values of the recorder's /diagnostics status."""
         values: dict[str, object] = {"bag_path": str(self.bag_path)}
+        values["state"] = "recording" if self.failure is None else "failed"
         values.update({f"count {t}": n for t, n in self.counts.items()})
-        lost = {t: g.lost + self.dropped[t] for t, g in self.gaps.items()}
+        lost = {t: g.lost + self.dropped[t] + self.not_written[t] for t, g in self.gaps.items()}
         values.update({f"lost {t}": n for t, n in lost.items()})
         values.update({f"gaps {t}": g.gap_count for t, g in self.gaps.items()})
         values.update({f"dropped {t}": n for t, n in self.dropped.items() if n})
@@ -317,14 +403,27 @@ class RecorderNode(Node):
             }
         )
         level, message = diagnostics.OK, "recording"
-        if self._writer_error is not None:
+        failure, outcome = self.failure, self.outcome
+        if failure is not None:
+            level, message = diagnostics.ERROR, self._failure_text()
+            values["error"] = failure.reason
+            values["errno"] = failure.errno_name
+            values["failed_path"] = str(failure.path)
+            values["failed_at_ns"] = failure.at_ns
+            values["failed_at"] = dt.datetime.fromtimestamp(failure.at_ns / NS_PER_S).isoformat(
+                timespec="milliseconds"
+            )
+            values.update({f"not_written {t}": n for t, n in self.not_written.items()})
+            if outcome is not None:
+                values["bag_file"] = "finished" if outcome.finished else "repairable"
+                values["recorded_until_ns"] = outcome.until_ns or ""
+                values["messages_kept"] = outcome.messages
+        elif self._writer_error is not None:
             level, message = diagnostics.ERROR, f"bag writer died: {self._writer_error!r}"
         elif any(lost.values()):
             level = diagnostics.WARN
             message = "recording; lost " + ", ".join(f"{n} of {t}" for t, n in lost.items() if n)
-        diagnostics.publish_status(
-            self._pub_diag, self, level=level, message=message, values=values
-        )
+        return level, message, values
 
     def close(self) -> None:
         """Finish the bag (idempotent), with what it could not write counted.
@@ -344,6 +443,9 @@ class RecorderNode(Node):
             self.dropped[topic] += 1
             self._note_stamp(topic, header_stamp_ns(data))
         self._note_dropped()
+        if self.failure is not None:
+            # Closed at the failure; said then, and on /diagnostics since.
+            self.get_logger().error(self._failure_text())
         if not self.writer.closed:
             self._store_losses()
             lost = {t: s["lost"] for t, s in self.loss_summary().items() if s["lost"]}
