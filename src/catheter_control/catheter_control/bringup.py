@@ -596,7 +596,7 @@ def compensator_choice(args: argparse.Namespace) -> dict[str, object]:
 
     Raises:
         CatheterError: the compensator and the model directory disagree, or the directory is
-            not a compensator's (both named).
+            not a compensator's (both named), or ``--feedback-gains`` is refused (named).
     """
     from catheter_control.models import resolve_compensator
 
@@ -608,6 +608,11 @@ def compensator_choice(args: argparse.Namespace) -> dict[str, object]:
     if args.feedback is not None:
         params["feedback"] = args.feedback
     if args.feedback_gains:
+        from catheter_models.feedback import FeedbackGains
+
+        # The node checks the file again at configure; checked here, a file that fails its
+        # seal, its tuned range or the envelope stops bringup (exit 2) before any node starts.
+        FeedbackGains.load(args.feedback_gains)
         params["feedback_gains"] = str(args.feedback_gains)
     return params
 

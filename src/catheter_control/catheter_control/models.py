@@ -179,9 +179,17 @@ def load_feedback(kind: str, gains_path: str, model_dir: str, rate_hz: float) ->
     the model is the shipped one (tuned on the simulated rig: a real rig needs its own,
     ``catheter-lab tune``).
 
+    The file is checked as :mod:`catheter_models.feedback.seal` says: sealed by
+    ``catheter-lab tune`` (an edited or unsealed file is refused, with how to re-tune or
+    reseal it), its gains within the range its tuning recorded, its authority and authority
+    timeout within the contract's envelope. ``-p feedback_gains:=...`` and bringup's
+    ``--feedback-gains`` name a file, so they pass the same checks.
+
     Raises:
         ParameterError: Unknown kind, a missing or malformed gains file, or a gain out of
             range (a negative gain, a sign error, is refused here, before anything moves).
+        FeedbackFileError: the file fails its seal, its tuned range or the envelope (every
+            problem named).
     """
     if kind not in FEEDBACKS:
         raise ParameterError(f"unknown feedback {kind!r}; available: {', '.join(FEEDBACKS)}")

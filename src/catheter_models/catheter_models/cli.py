@@ -202,6 +202,12 @@ def _cmd_tune(args: argparse.Namespace) -> int:
     from catheter_models.feedback.tune import design, identify, opening_pressure_pa
     from catheter_models.models.data import recordings_from_bags
 
+    if args.reseal is not None:
+        return _reseal(args)
+    if not args.bags or args.output is None:
+        from catheter_models.errors import ParameterError
+
+        raise ParameterError("give BAG... and -o OUTPUT (or --reseal FILE --reason TEXT)")
     recordings = recordings_from_bags(args.bags, rate_hz=args.rate_hz)
     model = identify(recordings)
     print(f"loop model: {model.describe()}")
@@ -210,6 +216,7 @@ def _cmd_tune(args: argparse.Namespace) -> int:
         max_sensitivity=args.max_sensitivity,
         opening_pressure_pa=opening_pressure_pa(recordings),
     )
+    gains = replace(gains, tuning={**gains.tuning, "recordings": [r.name for r in recordings]})
     notch = (
         f", notch at {gains.notch_frequency_hz:.2f} Hz" if gains.notch_frequency_hz > 0.0 else ""
     )
@@ -222,6 +229,22 @@ def _cmd_tune(args: argparse.Namespace) -> int:
     print(f"gains written to {gains.save(args.output)}")
     if args.report is not None:
         print(f"report: {write_tune_report(recordings, model, gains, found, args.report)}")
+    return 0
+
+
+def _reseal(args: argparse.Namespace) -> int:
+    """``tune --reseal FILE``: keep a deliberate edit of a gains file, after checking it."""
+    from catheter_models.errors import ParameterError
+    from catheter_models.feedback.seal import reseal
+
+    if args.bags or args.output is not None:
+        raise ParameterError("--reseal takes a gains file alone (no BAG, no -o)")
+    path, gains, found = reseal(args.reseal, args.reason or "")
+    print(
+        f"kp {gains.kp_pa_per_rad:.4g} Pa/rad, ki {gains.ki_pa_per_rad_s:.4g} Pa/(rad s); on the "
+        f"recorded loop: {found.describe()}"
+    )
+    print(f"resealed {path} ({args.reason.strip()})")
     return 0
 
 
@@ -555,12 +578,23 @@ def build_parser() -> argparse.ArgumentParser:
             "Fit the loop (dead time, lag, a ringing tip) to the pressure steps of recorded "
             "bags, then choose the PI gains of largest integral gain whose loop keeps the "
             "maximum sensitivity under a bound. Writes feedback.json into OUTPUT (a model "
-            "directory: the compensator node reads it from there with feedback:=pi)."
+            "directory: the compensator node reads it from there with feedback:=pi), sealed "
+            "with the loop it was tuned on and the range of gains it considers safe; an "
+            "edited file is refused until re-tuned or resealed (--reseal)."
         ),
     )
-    tune.add_argument("bags", nargs="+", type=Path, metavar="BAG", help="bags with fast steps")
+    tune.add_argument("bags", nargs="*", type=Path, metavar="BAG", help="bags with fast steps")
+    tune.add_argument("-o", "--output", type=Path, default=None, help="directory for feedback.json")
     tune.add_argument(
-        "-o", "--output", type=Path, required=True, help="directory for feedback.json"
+        "--reseal",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="seal a deliberately edited feedback.json again, after checking its gains against "
+        "the safety envelope, the tuned range and the margins on the recorded loop",
+    )
+    tune.add_argument(
+        "--reason", default=None, help="with --reseal: why (kept in the file); required"
     )
     tune.add_argument(
         "--max-sensitivity",

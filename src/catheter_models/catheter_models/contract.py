@@ -40,6 +40,25 @@ PRESSURE_LIMIT_HARD_PA: Final = 6.0e5
 """The highest value any ``max_pressure_pa`` parameter accepts (6 bar, twice the thesis's
 span, the top of the 0-6 bar valve modules' range): beyond it a typo, not a choice."""
 
+FEEDBACK_AUTHORITY_PA: Final = 0.5e5
+"""How far feedback on the measured bend may move the command from the feedforward's by default
+(``max_correction_pa``, 0.5 bar): a sixth of ``MAX_PRESSURE_PA``, about 7 deg of bend on the
+simulated rig, so a laser that freezes at a plausible value cannot drive the catheter to the
+clamp."""
+FEEDBACK_MAX_AUTHORITY_PA: Final = 1.0e5
+"""The safety envelope's bound on that authority (1 bar): any ``feedback.json``, sealed or not,
+with more is refused. A third of ``MAX_PRESSURE_PA``'s span (15 deg at the rig's stiffest
+15 deg/bar) is as far as a lying laser may bend the catheter from its plan; wider, the authority
+stops being a bound and the clamp is all that is left."""
+FEEDBACK_AUTHORITY_TIMEOUT_S: Final = 0.5
+"""How long the feedback may press against its authority before the run ramps down, by default
+(``authority_timeout_s``): the value the shipped gains have run with since feedback was added,
+three times the 0.15 s the slew limit takes to cross the whole clamp."""
+FEEDBACK_MAX_AUTHORITY_TIMEOUT_S: Final = 2.0
+"""The safety envelope's bound on that timeout (2 s, four times the default): how long a catheter
+may be held off its plan by a frozen laser before the run stops. Longer, and the authority check
+is no check (a 10^6 s timeout never fires)."""
+
 
 MAX_TRAJECTORY_DURATION_S: Final = 600.0
 """The longest trajectory (time of its last point) the compensator takes: 10 minutes.

@@ -36,12 +36,12 @@ foreign simulator, or a real rig driven by hand. The compensator node uses
 
 from __future__ import annotations
 
-import json
 import math
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
+from catheter_models.contract import FEEDBACK_AUTHORITY_PA, FEEDBACK_AUTHORITY_TIMEOUT_S
 from catheter_models.errors import ParameterError
 
 GAINS_FILE = "feedback.json"
@@ -85,8 +85,8 @@ class FeedbackGains:
     opening_pressure_pa: float = 0.0
     notch_frequency_hz: float = 0.0
     notch_damping: float = 0.5
-    max_correction_pa: float = 0.5e5
-    authority_timeout_s: float = 0.5
+    max_correction_pa: float = FEEDBACK_AUTHORITY_PA
+    authority_timeout_s: float = FEEDBACK_AUTHORITY_TIMEOUT_S
     tuning: dict[str, Any] = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
@@ -122,37 +122,28 @@ class FeedbackGains:
         return self.kp_pa_per_rad / self.ki_pa_per_rad_s
 
     def save(self, directory: Path) -> Path:
-        """Write ``feedback.json`` into ``directory`` (beside a model); return its path."""
-        path = Path(directory) / GAINS_FILE
-        path.write_text(json.dumps(asdict(self), indent=2, sort_keys=True) + "\n")
-        return path
+        """Write ``feedback.json``, sealed, into ``directory`` (beside a model); return its path.
+
+        Only gains whose ``tuning`` records what ``catheter-lab tune`` designed load again
+        (:mod:`catheter_models.feedback.seal`); gains made by hand are for :class:`ClosedLoop`
+        offline, not for a file the compensator runs.
+        """
+        from catheter_models.feedback.seal import write_sealed
+
+        return write_sealed(self, Path(directory) / GAINS_FILE)
 
     @classmethod
     def load(cls, path: Path) -> FeedbackGains:
-        """Read gains from a ``feedback.json`` (or the directory holding one).
+        """Read gains from a ``feedback.json`` (or the directory holding one), checked.
 
         Raises:
             ParameterError: missing file, unknown or misspelt keys, or a gain out of range.
+            FeedbackFileError: unsealed, its seal broken, a gain outside its tuned range, or
+                an authority or timeout beyond the safety envelope (every problem named).
         """
-        path = Path(path)
-        if path.is_dir():
-            path = path / GAINS_FILE
-        try:
-            raw = json.loads(path.read_text())
-        except FileNotFoundError:
-            raise ParameterError(f"no feedback gains at {path}") from None
-        except json.JSONDecodeError as exc:
-            raise ParameterError(f"{path}: not JSON ({exc})") from None
-        if not isinstance(raw, dict):
-            raise ParameterError(f"{path}: expected an object of gains")
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(raw) - known)
-        if unknown:
-            raise ParameterError(
-                f"{path}: unknown feedback keys {', '.join(unknown)}; "
-                f"known: {', '.join(sorted(known))}"
-            )
-        return cls(**raw)
+        from catheter_models.feedback.seal import load_checked
+
+        return load_checked(path)
 
 
 class PIDFeedback:

@@ -26,6 +26,7 @@ import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -388,11 +389,16 @@ def frequency_grid(rate_hz: float) -> FloatArray:
 def loop_response(
     model: LoopModel, gains: FeedbackGains, w_rad_s: FloatArray
 ) -> npt.NDArray[np.complex128]:
-    """Open-loop response C(jw) N(jw) G(jw), with the controller's own sample of delay."""
+    """Open-loop response C(jw) N(jw) F(jw) G(jw), with the controller's own sample of delay.
+
+    F is the measurement's low-pass (1 when ``measurement_filter_s`` is 0, as the design
+    leaves it): a gains file that adds one is checked on the loop it will run.
+    """
     s = 1j * w_rad_s
     c = gains.kp_pa_per_rad + gains.ki_pa_per_rad_s / s
     n = notch_response(w_rad_s, gains.notch_frequency_hz, gains.notch_damping)
-    return np.asarray(c * n * model.response(w_rad_s, 1.5 / model.rate_hz))
+    f = 1.0 / (1.0 + s * gains.measurement_filter_s)
+    return np.asarray(c * n * f * model.response(w_rad_s, 1.5 / model.rate_hz))
 
 
 def margins(model: LoopModel, gains: FeedbackGains) -> Margins:
@@ -414,6 +420,12 @@ def margins(model: LoopModel, gains: FeedbackGains) -> Margins:
     else:
         pm, fc = math.inf, 0.0
     return Margins(ms, gm, pm, fc)
+
+
+def plainly_stable(model: LoopModel, gains: FeedbackGains) -> bool:
+    """Whether ``gains`` on ``model`` is a loop the design would accept as stable (below)."""
+    loop = loop_response(model, gains, frequency_grid(model.rate_hz))
+    return bool(_plainly_stable(loop[None, :])[0])
 
 
 def _plainly_stable(loops: npt.NDArray[np.complex128]) -> npt.NDArray[np.bool_]:
@@ -481,5 +493,56 @@ def design(
         "method": f"MIGO: the largest ki with Ms <= {max_sensitivity:g} on the identified loop",
         "model": model.describe(),
         "margins": found.describe(),
+        **design_record(model, gains, found, max_sensitivity),
     }
     return dataclasses.replace(gains, tuning=tuning), found
+
+
+GAIN_FIELDS = ("kp_pa_per_rad", "ki_pa_per_rad_s", "kd_pa_s_per_rad")
+"""The gains whose range the tuning records: they set the loop's gain, hence its margins."""
+
+
+def safe_gain_factor(gain_margin: float) -> float:
+    """How far either way a gain may sit from its designed value and still count as tuned.
+
+    Scaling the gains by f divides the loop's gain margin by f. At f = sqrt(GM) the loop keeps
+    a gain margin of sqrt(GM) as well: the margin is split evenly between what a person may
+    change by hand and what is left for the catheter's gain that the design did not see (a
+    PAM catheter's gain changes along its curve, with the bend of the shaft and with wear; the
+    design took the 90th percentile of the recorded steps', so a stiffer place exists). The
+    MIGO bound Ms <= 1.6 guarantees GM >= 2.67, so this is at least 1.63 either way, with a
+    gain margin of at least 1.63 left at its edge; gains x100 are far outside. Below the
+    designed gains the loop stays stable (the design refuses conditionally stable loops), but
+    it is no longer the loop that was verified, so the range is the same factor down.
+
+    Raises:
+        SignalError: no finite gain margin (a loop whose phase never reaches -180 deg before
+            the Nyquist frequency, which the controller's own delay rules out).
+    """
+    if not (math.isfinite(gain_margin) and gain_margin > 0.0):
+        raise SignalError(f"tune: gain margin {gain_margin} gives no range to record")
+    return max(1.0, math.sqrt(gain_margin))
+
+
+def design_record(
+    model: LoopModel, gains: FeedbackGains, found: Margins, max_sensitivity: float
+) -> dict[str, Any]:
+    """What the tuning designed, for ``feedback.json``: the loop, the gains, their safe range.
+
+    The loader (:mod:`catheter_models.feedback.seal`) refuses gains outside ``safe`` and
+    ``catheter-lab tune --reseal`` re-checks the margins on ``loop``.
+    """
+    factor = safe_gain_factor(found.gain_margin)
+    designed = {f.name: getattr(gains, f.name) for f in dataclasses.fields(gains)}
+    del designed["tuning"]
+    return {
+        "loop": dataclasses.asdict(model),
+        "max_sensitivity": max_sensitivity,
+        # JSON has no inf: a margin that is not finite (none found on the grid) is null.
+        "designed_margins": {
+            k: (v if math.isfinite(v) else None) for k, v in dataclasses.asdict(found).items()
+        },
+        "designed": designed,
+        "gain_factor": factor,
+        "safe": {name: [designed[name] / factor, designed[name] * factor] for name in GAIN_FIELDS},
+    }
