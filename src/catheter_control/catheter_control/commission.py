@@ -35,7 +35,6 @@ import functools
 import io
 import json
 import math
-import os
 import shutil
 import sys
 import time
@@ -51,7 +50,11 @@ from catheter_control.commission_rig import (
     RigError,
     check_response,
 )
-from catheter_control.graph_domain import GraphConflictError, domain_id_argument
+from catheter_control.graph_domain import (
+    GraphConflictError,
+    default_domain_choice,
+    domain_id_argument,
+)
 from catheter_control.models import COMMISSIONED_FILE
 from catheter_control.trajectory import (
     TrajectoryLimits,
@@ -615,7 +618,7 @@ def main(argv: list[str] | None = None) -> int:
 
     args = _parse(argv)
     mode = "sim" if args.sim else "emulated" if args.emulated_rig else "running"
-    domain = args.domain_id or ("env" if os.environ.get("ROS_DOMAIN_ID") else "auto")
+    domain = default_domain_choice(args.domain_id)
     try:
         job = Commission(
             out_dir=args.output,

@@ -18,7 +18,13 @@ from collections.abc import Sequence
 
 from catheter_models.errors import GraphConflictError
 
-__all__ = ["GraphConflictError", "choose_domain", "domain_id_argument", "nodes_in_domain"]
+__all__ = [
+    "GraphConflictError",
+    "choose_domain",
+    "default_domain_choice",
+    "domain_id_argument",
+    "nodes_in_domain",
+]
 
 
 DISCOVERY_WAIT_S = 2.0
@@ -45,6 +51,15 @@ def domain_id_argument(value: str) -> str:
     raise argparse.ArgumentTypeError(
         f"{value!r}: give auto (a domain with nobody in it), env (ROS_DOMAIN_ID as set) or 0-232"
     )
+
+
+def default_domain_choice(given: str | None) -> str:
+    """``--domain-id`` as given, else what a tool that starts its own graph defaults to.
+
+    ``env`` where ROS_DOMAIN_ID is set (a person chose a domain), else ``auto``: ROS's default
+    domain 0 is where a rig and every ROS tool run, so a simulated graph goes elsewhere.
+    """
+    return given or ("env" if os.environ.get("ROS_DOMAIN_ID") else "auto")
 
 
 def nodes_in_domain(domain_id: int, wait_s: float = DISCOVERY_WAIT_S) -> list[str]:

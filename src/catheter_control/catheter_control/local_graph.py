@@ -22,7 +22,7 @@ from catheter_control.bringup import (
     driver_specs,
     sim_graph_specs,
 )
-from catheter_control.graph_domain import choose_domain
+from catheter_control.graph_domain import choose_domain, default_domain_choice
 from catheter_control.models import SHIPPED, resolve_compensator, resolve_feedback
 from catheter_models.errors import CatheterError, GraphConflictError
 from catheter_models.geometry import Calibration
@@ -68,8 +68,7 @@ def prepare_local_graph(args: argparse.Namespace) -> None:
     args.compensator = resolve_compensator(args.compensator, args.model_dir)
     # A commissioned model directory runs with the feedback it was verified with.
     args.feedback = resolve_feedback(args.feedback, args.model_dir)
-    choice = args.domain_id or ("env" if os.environ.get("ROS_DOMAIN_ID") else "auto")
-    choose_domain(choice, args.namespace, "follow_trajectory")
+    choose_domain(default_domain_choice(args.domain_id), args.namespace, "follow_trajectory")
 
 
 def start_local_graph(
