@@ -185,35 +185,38 @@ def load_checked(path: Path) -> FeedbackGains:
     """
     path, raw = _read(path)
     gains = _gains(path, raw)
-    problems = envelope_problems(gains)
+    envelope = envelope_problems(gains)
     record = _record(gains)
+    tuned = [] if record is None else range_problems(gains, record)
     sealed = raw.get(SEAL_KEY)
+    retune = f"re-tune (catheter-lab tune BAGS -o {path.parent})"
+    # Resealing is offered only where it could succeed: never past the envelope or the range.
+    resealable = record is not None and not envelope and not tuned
     reseal = f"catheter-lab tune --reseal {path} --reason '...'"
-    retune = f"catheter-lab tune BAGS -o {path.parent}"
+    problems = list(envelope)
     if sealed is None:
         problems.append(
             f"it is not sealed (no {SEAL_KEY}): written by hand or before gains files were "
-            f"sealed; the compensator runs only gains whose tuning it can check: re-tune "
-            f"({retune})"
-            + (f", or, to keep these gains knowingly, {reseal}" if record is not None else "")
+            f"sealed; the compensator runs only gains whose tuning it can check: {retune}"
+            + (f", or, to keep these gains knowingly, {reseal}" if resealable else "")
         )
-    else:
-        actual = _digest(raw)
-        if sealed != actual:
-            problems.append(
-                f"its {SEAL_KEY} does not match its content (sealed {str(sealed)[:12]}..., "
-                f"content {actual[:12]}...): it was edited after catheter-lab tune wrote it; "
-                f"re-tune ({retune}), or keep a deliberate edit by resealing it knowingly "
-                f"({reseal}, which first re-checks the gains on the recorded loop)"
+    elif sealed != (actual := _digest(raw)):
+        problems.append(
+            f"its {SEAL_KEY} does not match its content (sealed {str(sealed)[:12]}..., "
+            f"content {actual[:12]}...): it was edited after catheter-lab tune wrote it; "
+            + (
+                f"{retune}, or keep a deliberate edit by resealing it knowingly ({reseal}, "
+                "which first re-checks the gains on the recorded loop)"
+                if resealable
+                else retune
             )
-    if record is None:
-        if sealed is not None:
-            problems.append(
-                "its tuning records no loop and no safe range (not written by catheter-lab "
-                f"tune): re-tune ({retune})"
-            )
-    else:
-        problems += range_problems(gains, record)
+        )
+    if record is None and sealed is not None:
+        problems.append(
+            f"its tuning records no loop and no safe range (not written by catheter-lab tune): "
+            f"{retune}"
+        )
+    problems += tuned
     if problems:
         raise FeedbackFileError(f"{path} refused: " + "; ".join(problems))
     return gains
