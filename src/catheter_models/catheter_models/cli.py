@@ -171,8 +171,15 @@ def _cmd_train(args: argparse.Namespace) -> int:
     cls = model_class(args.kind)
     if args.output.exists() and any(args.output.iterdir()):
         raise CatheterError(f"{args.output} exists and is not empty; choose a new directory")
-    train = recordings_from_bags(args.train, rate_hz=args.rate_hz)
-    validation = recordings_from_bags(args.validate, rate_hz=args.rate_hz)
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        train = recordings_from_bags(
+            args.train, rate_hz=args.rate_hz, accept_implausible=args.accept_implausible
+        )
+        validation = recordings_from_bags(
+            args.validate, rate_hz=args.rate_hz, accept_implausible=args.accept_implausible
+        )
+    findings = _said_and_kept(seen)
     try:
         model = cls(**_parse_settings(args.set))
     except TypeError as exc:
@@ -184,6 +191,10 @@ def _cmd_train(args: argparse.Namespace) -> int:
     took_s = time.perf_counter() - start
     unit = "deg" if cls.direction == "forward" else "bar"
     metrics: dict[str, Any] = {"train_time_s": took_s}
+    if findings:
+        # What the plausibility check said about the bags this model learned from, accepted
+        # refusals included, so the model's manifest carries it.
+        metrics["bag_plausibility"] = findings
     for rec in validation:
         score = modelling_score(model, rec).metrics
         metrics[f"validation.{rec.name}"] = {
@@ -197,6 +208,32 @@ def _cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def _said_and_kept(seen: list[warnings.WarningMessage]) -> dict[str, list[dict[str, Any]]]:
+    """Say each caught warning again; keep the plausibility findings by bag name."""
+    from catheter_models.bag.plausible import PlausibilityWarning
+
+    kept: dict[str, list[dict[str, Any]]] = {}
+    for w in seen:
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        if isinstance(w.message, PlausibilityWarning):
+            entry = {**w.message.finding.to_dict(), "accepted": w.message.accepted}
+            kept.setdefault(Path(str(w.message.bag)).name, []).append(entry)
+    return kept
+
+
+def _accept_implausible_argument(parser: argparse.ArgumentParser) -> None:
+    from catheter_models.bag.plausible import ACCEPT_FLAG
+
+    parser.add_argument(
+        ACCEPT_FLAG,
+        dest="accept_implausible",
+        action="store_true",
+        help="go on with bags whose data fails the plausibility check (values against the "
+        "contract, stamps, non-finite share); each finding is still printed (and, for train, "
+        "recorded in the model's manifest)",
+    )
+
+
 def _cmd_tune(args: argparse.Namespace) -> int:
     from catheter_models.feedback.report import write_tune_report
     from catheter_models.feedback.tune import design, identify, opening_pressure_pa
@@ -208,7 +245,9 @@ def _cmd_tune(args: argparse.Namespace) -> int:
         from catheter_models.errors import ParameterError
 
         raise ParameterError("give BAG... and -o OUTPUT (or --reseal FILE --reason TEXT)")
-    recordings = recordings_from_bags(args.bags, rate_hz=args.rate_hz)
+    recordings = recordings_from_bags(
+        args.bags, rate_hz=args.rate_hz, accept_implausible=args.accept_implausible
+    )
     model = identify(recordings)
     print(f"loop model: {model.describe()}")
     gains, found = design(
@@ -292,7 +331,9 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         raise CatheterError(f"{args.output} exists and is not empty; choose a new directory")
     model = load_model(args.model)
     rate_hz = model.fitted_rate_hz if args.rate_hz is None else args.rate_hz
-    recordings = recordings_from_bags(args.bags, rate_hz=rate_hz)
+    recordings = recordings_from_bags(
+        args.bags, rate_hz=rate_hz, accept_implausible=args.accept_implausible
+    )
     try:
         result = compare(model, recordings, n_worst=args.worst, window_s=args.window_s)
     except RateMismatchError as exc:
@@ -337,8 +378,12 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     from catheter_models.models.data import recordings_from_bags
 
     model = load_model(args.model)
-    train = recordings_from_bags(args.train, rate_hz=model.fitted_rate_hz)
-    test = recordings_from_bags(args.test, rate_hz=model.fitted_rate_hz)
+    train = recordings_from_bags(
+        args.train, rate_hz=model.fitted_rate_hz, accept_implausible=args.accept_implausible
+    )
+    test = recordings_from_bags(
+        args.test, rate_hz=model.fitted_rate_hz, accept_implausible=args.accept_implausible
+    )
     result = diagnose(
         model,
         train,
@@ -386,8 +431,12 @@ def _change(args: argparse.Namespace, change: str, make: Any) -> int:
     if args.output.exists():
         raise CatheterError(f"{args.output} exists; choose a new model directory")
     model = _greybox_of(args.model)
-    train = recordings_from_bags(args.train, rate_hz=model.fitted_rate_hz)
-    test = recordings_from_bags(args.test or [], rate_hz=model.fitted_rate_hz)
+    train = recordings_from_bags(
+        args.train, rate_hz=model.fitted_rate_hz, accept_implausible=args.accept_implausible
+    )
+    test = recordings_from_bags(
+        args.test or [], rate_hz=model.fitted_rate_hz, accept_implausible=args.accept_implausible
+    )
     new = make(model).fit(train, progress=not args.no_progress)
     new.save(args.output, training=train)
     print(f"{' -> '.join(new.chain)}: {new.block_values() or new.core_name}")
@@ -425,8 +474,12 @@ def _cmd_explain(args: argparse.Namespace) -> int:
     if args.output.exists():
         raise CatheterError(f"{args.output} exists; choose a new directory")
     model = load_model(args.model)
-    train = recordings_from_bags(args.train, rate_hz=model.fitted_rate_hz)
-    test = recordings_from_bags(args.test, rate_hz=model.fitted_rate_hz)
+    train = recordings_from_bags(
+        args.train, rate_hz=model.fitted_rate_hz, accept_implausible=args.accept_implausible
+    )
+    test = recordings_from_bags(
+        args.test, rate_hz=model.fitted_rate_hz, accept_implausible=args.accept_implausible
+    )
     args.output.mkdir(parents=True)
     parent: list[int | None] = [None]
 
@@ -489,6 +542,7 @@ def _refit_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--test", nargs="+", type=Path, help="held-out bags scored in the history")
     p.add_argument("--lab", type=Path, default=Path("lab"), help="the lab's directory (lab)")
     p.add_argument("--no-progress", action="store_true")
+    _accept_implausible_argument(p)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -569,6 +623,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     train.add_argument("--rate-hz", type=float, default=SENSOR_RATE_HZ, help="resampling rate [Hz]")
     train.add_argument("--quiet", action="store_true", help="no progress bar")
+    _accept_implausible_argument(train)
     train.set_defaults(func=_cmd_train)
 
     tune = sub.add_parser(
@@ -604,6 +659,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     tune.add_argument("--report", type=Path, default=None, help="write an HTML report here")
     tune.add_argument("--rate-hz", type=float, default=SENSOR_RATE_HZ, help="resampling rate [Hz]")
+    _accept_implausible_argument(tune)
     tune.set_defaults(func=_cmd_tune)
 
     models = sub.add_parser("models", help="list the model kinds and their settings")
@@ -643,6 +699,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="resampling rate [Hz] (default: the rate the model was fitted at)",
     )
+    _accept_implausible_argument(comp)
     comp.set_defaults(func=_cmd_compare)
 
     diag = sub.add_parser("diagnose", help="which physical effect does a model lack? (docs/lab.md)")
@@ -664,6 +721,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     diag.add_argument("-o", "--output", type=Path, default=None, help="figures and JSON here")
     _workers_argument(diag)
+    _accept_implausible_argument(diag)
     diag.set_defaults(func=_cmd_diagnose)
 
     core = sub.add_parser("core", help="change a grey-box model's hysteresis core and refit")
@@ -682,6 +740,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     expl.add_argument("--max-steps", type=int, default=4, help="changes at most (4)")
     _workers_argument(expl)
+    _accept_implausible_argument(expl)
     expl.set_defaults(func=_cmd_explain)
 
     add = sub.add_parser("add", help="add an effect block to a grey-box model and refit")
@@ -710,9 +769,12 @@ def main(argv: list[str] | None = None) -> None:
     def show(message: Warning | str, category: type[Warning], *_: object, **__: object) -> None:
         print(f"catheter-lab {command}: warning: {message}", file=sys.stderr)
 
+    from catheter_models.bag.plausible import PlausibilityWarning
+
     with warnings.catch_warnings():
         # Every gap in every input is said, once per bag and stream, in the command's voice.
         warnings.simplefilter("always", BagGapWarning)
+        warnings.simplefilter("always", PlausibilityWarning)
         warnings.showwarning = show
         try:
             code = args.func(args)

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Collection, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Final
@@ -30,6 +30,12 @@ from catheter_models.bag.messages import (
     kilted_typestore,
 )
 from catheter_models.bag.metadata import BagLayout, bag_custom_data, locate_bag
+from catheter_models.bag.plausible import (
+    ImplausibleBagError,
+    PlausibilityReport,
+    StreamSamples,
+    check_streams,
+)
 from catheter_models.bag.scan import has_footer, scan_mcap, truncated_bag_error
 from catheter_models.contract import (
     ANGLE_DESIRED,
@@ -146,6 +152,8 @@ class BagData:
         out_of_range: ``Range`` readings left out because they lie outside the message's own
             [min_range, max_range] (the message definition says to discard them), by name.
         ambient_pa: Ambient pressure [Pa absolute] subtracted to get gauge pressure.
+        plausibility: What the plausibility check found (``bag.plausible``), warnings and
+            refusals alike (``load_bag(require_plausible=True)`` raises on a refusal instead).
     """
 
     path: Path
@@ -155,6 +163,7 @@ class BagData:
     dropped: Mapping[str, int]
     out_of_range: Mapping[str, int]
     ambient_pa: float
+    plausibility: PlausibilityReport = field(default_factory=PlausibilityReport)
 
     @property
     def pressure_command(self) -> StampedSeries:
@@ -370,8 +379,10 @@ def load_bag(
     namespace: str = DEFAULT_NAMESPACE,
     ambient_pa: float = AMBIENT_PRESSURE_PA,
     topics: Collection[str] | None = None,
+    *,
+    require_plausible: bool = False,
 ) -> BagData:
-    """Load a bag that meets the interface contract.
+    """Load a bag that meets the interface contract, and check its data is plausible.
 
     Topics are found under ``namespace`` first; failing that, by their contract name as a
     suffix in any namespace (a bag recorded at the root or under another namespace), as long
@@ -384,14 +395,22 @@ def load_bag(
         topics: Contract names to load (e.g. ``["pressure/command", "tip/angle"]``); each must
             be present. None: the required topics, plus ``tip/distance`` and
             ``angle/desired`` when present.
+        require_plausible: Refuse a bag whose data fails the plausibility check
+            (``bag.plausible``). What trains, compares or tunes a model asks for this
+            (``models.data.recording_from_bag``); without it the findings are only reported
+            in ``plausibility``, for tools that look at any bag (``bag info``, plots).
 
     Returns:
-        The series in SI units, with the bag's ``custom_data`` and counts of dropped samples.
+        The series in SI units, with the bag's ``custom_data``, counts of dropped samples and
+        the plausibility findings (warnings, and refusals when accepted).
 
     Raises:
         TruncatedBagError: An MCAP file has no footer (killed recorder); says how to repair.
         MissingTopicError: A required (or requested) topic is absent or has no messages;
             names it (and lists the bag's topics).
+        ImplausibleBagError: The data of a loaded topic fails the plausibility check
+            (``bag.plausible``: values against the contract, stamps, non-finite share); names
+            each finding. Only with ``require_plausible``.
         BagError: A topic is ambiguous or has the wrong type, a ``JointState`` lacks the
             ``bend`` joint, messages are unstamped, or the bag cannot be read.
         ParameterError: ``topics`` names something that is not a contract stream.
@@ -431,6 +450,12 @@ def load_bag(
             "them; a bag holds data on every required topic"
         )
         raise MissingTopicError(msg)
+    for acc in collected.values():
+        acc.refuse_unstamped()
+    # Checked before anything is dropped or sorted, so nothing the loader tidies goes unsaid.
+    report = check_streams([acc.samples() for acc in collected.values()], start_ns, ambient_pa)
+    if report.refusals and require_plausible:
+        raise ImplausibleBagError(layout.path, report)
     series: dict[str, StampedSeries] = {}
     dropped: dict[str, int] = {}
     out_of_range: dict[str, int] = {}
@@ -444,6 +469,7 @@ def load_bag(
         dropped=MappingProxyType(dropped),
         out_of_range=MappingProxyType(out_of_range),
         ambient_pa=float(ambient_pa),
+        plausibility=report,
     )
 
 
@@ -541,18 +567,30 @@ class _Accumulator:
         self.topic = topic
         self.msgtype = msgtype
         self.stamps_ns: list[int] = []
+        self.log_ns: list[int] = []
         self.values: list[float] = []
         self.in_range: list[bool] = []
         self.unstamped = 0
 
-    def add(self, stamp_ns: int, value: float, in_range: bool = True) -> None:
+    def add(self, log_ns: int, stamp_ns: int, value: float, in_range: bool = True) -> None:
         if stamp_ns == 0:
             self.unstamped += 1
+        self.log_ns.append(log_ns)
         self.stamps_ns.append(stamp_ns)
         self.values.append(value)
         self.in_range.append(in_range)
 
-    def finish(self, start_ns: int) -> tuple[StampedSeries, int, int]:
+    def samples(self) -> StreamSamples:
+        """The samples as the file holds them, for the plausibility check."""
+        return StreamSamples(
+            name=self.name,
+            topic=self.topic,
+            stamps_ns=np.asarray(self.stamps_ns, dtype=np.int64),
+            log_ns=np.asarray(self.log_ns, dtype=np.int64),
+            values=np.asarray(self.values, dtype=np.float64),
+        )
+
+    def refuse_unstamped(self) -> None:
         if self.unstamped:
             msg = (
                 f"{self.unstamped} of {len(self.stamps_ns)} messages on {self.topic} have "
@@ -560,6 +598,9 @@ class _Accumulator:
                 "true, so they cannot be aligned"
             )
             raise BagError(msg)
+
+    def finish(self, start_ns: int) -> tuple[StampedSeries, int, int]:
+        self.refuse_unstamped()
         stamps = np.asarray(self.stamps_ns, dtype=np.int64)
         values = np.asarray(self.values, dtype=np.float64)
         finite = np.isfinite(values)
@@ -603,8 +644,8 @@ def _collect(
     # An empty connection list would mean "all topics" to rosbags.
     if not connections:
         return accs
-    for conn, _log_ns, raw in reader.messages(connections=connections):
+    for conn, log_ns, raw in reader.messages(connections=connections):
         name = by_topic[conn.topic]
         msg = reader.deserialize(raw, conn.msgtype)
-        accs[name].add(*_decode(name, msg, conn.topic, ambient_pa))
+        accs[name].add(int(log_ns), *_decode(name, msg, conn.topic, ambient_pa))
     return accs

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from catheter_models.bag.metadata import locate_bag
+from catheter_models.bag.plausible import PlausibilityWarning
 from catheter_models.bag.reader import load_bag
 from catheter_models.contract import PRESSURE_COMMAND, SENSOR_RATE_HZ, TIP_ANGLE
 from catheter_models.errors import BagError, MissingTopicError
@@ -40,26 +41,43 @@ def bag_sha256(path: Path | str) -> str:
     return digest.hexdigest()
 
 
-def recording_from_bag(path: Path | str, rate_hz: float = SENSOR_RATE_HZ) -> Recording:
+def recording_from_bag(
+    path: Path | str, rate_hz: float = SENSOR_RATE_HZ, *, accept_implausible: bool = False
+) -> Recording:
     """Load the valve command and the measured angle of a bag on a uniform ``rate_hz`` grid.
+
+    The bag's data must be plausible (``bag.plausible``): a refusing finding refuses the bag
+    unless ``accept_implausible`` (a person going on knowingly).
 
     Warns:
         BagGapWarning: A stream lacks samples (one warning per stream, naming the gaps).
+        PlausibilityWarning: One per plausibility finding on a bag that is used (warnings,
+            and accepted refusals).
 
     Raises:
         MissingTopicError: The bag lacks ``pressure/command`` or ``tip/angle``: it does not fit
             the models' signals (the message names the topic and lists the bag's).
         TruncatedBagError: The recorder was killed; the message says how to repair the bag.
+        ImplausibleBagError: The data fails the plausibility check (each finding named).
         BagError: Any other reason the bag cannot be read as the contract says.
     """
     path = Path(path)
     try:
-        data = load_bag(path, topics=[PRESSURE_COMMAND.name, TIP_ANGLE.name, "pressure/measured"])
+        data = load_bag(
+            path,
+            topics=[PRESSURE_COMMAND.name, TIP_ANGLE.name, "pressure/measured"],
+            require_plausible=not accept_implausible,
+        )
     except MissingTopicError as exc:
         raise MissingTopicError(
             f"{path} does not fit the models' signals (input {PRESSURE_COMMAND.name}, "
             f"output {TIP_ANGLE.name}): {exc}"
         ) from None
+    for finding in data.plausibility.findings:
+        warnings.warn(
+            PlausibilityWarning(path, finding, accepted=finding.severity == "refuse"),
+            stacklevel=2,
+        )
     # The uniform grid is not cut at a gap: it holds the command from before it (as the valve
     # held it) and interpolates a measurement across it. Say so, naming where, so nobody
     # trains on made-up samples without knowing.
@@ -129,10 +147,13 @@ def locate_training_bags(training_bags: Mapping[str, str], bags_dir: Path | str)
 
 
 def recordings_from_bags(
-    paths: Iterable[Path | str], rate_hz: float = SENSOR_RATE_HZ
+    paths: Iterable[Path | str],
+    rate_hz: float = SENSOR_RATE_HZ,
+    *,
+    accept_implausible: bool = False,
 ) -> list[Recording]:
     """:func:`recording_from_bag` for each path."""
-    return [recording_from_bag(p, rate_hz) for p in paths]
+    return [recording_from_bag(p, rate_hz, accept_implausible=accept_implausible) for p in paths]
 
 
 def simulate_recording(
