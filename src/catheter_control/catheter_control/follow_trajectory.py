@@ -12,6 +12,15 @@ plot, and says where the bag is. A trajectory that does not start straight is pr
 1 s move from rest and a 1 s hold (``--lead-in-s``), which are not scored, as in the
 benchmarks.
 
+With a bag (``--sim``, ``--emulated-rig``) the run is refused before anything starts when the
+bag's disk lacks room for what it will write (:mod:`catheter_models.bag.space`), and
+report.json and tracking.png get their space then (a disk that fills mid-run cannot keep them
+from being written). During the run the recorder is watched
+(:mod:`catheter_control.recording_watch`): if it exits or reports that it cannot write, the
+run stops as the compensator's own stops do (ramped down, scored up to there, exit 4), or
+with ``--continue-without-bag`` goes on; either way it says how many seconds went
+unrecorded, from when.
+
 This file is the command line: its arguments, the order of the steps and the exit codes.
 The steps are their own modules: bringing up a local rig (:mod:`catheter_control.local_graph`),
 the run on ROS (:mod:`catheter_control.trajectory_client`, with
@@ -26,6 +35,7 @@ import datetime as dt
 import signal
 import sys
 import threading
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -50,23 +60,30 @@ from catheter_control.trajectory import (
     preset_knots,
     with_lead_in,
 )
+from catheter_models.bag.space import (
+    check_free_space,
+    contract_streams,
+    need_for,
+)
 from catheter_models.contract import CONTROL_RATE_HZ, DEFAULT_NAMESPACE
 from catheter_models.errors import CatheterError, GraphConflictError, ParameterError
 from catheter_models.signals import TEST_TRAJECTORIES, get_preset
 
 if TYPE_CHECKING:
-    from catheter_control.tracking_report import RunRecord
+    from catheter_control.tracking_report import ReservedFile, RunRecord
 
 EXIT_REFUSED = 2
 """Refused before anything moved: the trajectory (by this tool's checks, or by the
 compensator), a compensator that contradicts its model directory or a model directory that is
 not a compensator's, or (``--sim``/``--emulated-rig``) a namespace and domain where another
-graph already runs."""
+graph already runs, or a disk without room for the run's bag (the figures and the path are
+named)."""
 EXIT_GRAPH = 3
 """The graph did not come up, or never started the trajectory."""
 EXIT_STOPPED = 4
-"""The compensator stopped the run part-way (a stale sensor, a failed model): it ramped the
-pressure down and said why; the partial run is still reported."""
+"""The run stopped part-way: the compensator stopped it (a stale sensor, a failed model), or,
+with a bag, the recorder died or cannot write (unless ``--continue-without-bag``); the
+pressure was ramped down, the reason said, and the partial run is still reported."""
 EXIT_INTERRUPTED = 130
 """A person interrupted the run (Ctrl-C, SIGINT; SIGTERM alike): the goal was cancelled and a
 started graph stopped (the compensator ramps down), and the partial run is reported when there
@@ -74,6 +91,14 @@ is anything to score. Not EXIT_STOPPED: that says the rig or the model failed, w
 (commission) acts on; an interrupt says nothing about the rig. 130 is what shells report for a
 command that SIGINT ended (128 + 2), so a script that runs this tool sees what it would see for
 any other command a person interrupted."""
+
+
+START_STOP_S = 30.0
+"""What a recorded run records beyond its trajectory, for the free-space check [s]: the
+graph coming up and the recorder hearing every stream (5-15 s on a busy host), the ramp-down
+and the last reports (3.5 s), and the stop."""
+LOG_BYTES = 2_000_000
+"""Room for the started nodes' logs in the run directory [bytes] (a normal run: 10-50 kB)."""
 
 
 @dataclass(frozen=True)
@@ -129,6 +154,12 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
         help="with --sim/--emulated-rig: SCHED_FIFO priority of the started nodes' loops "
         "(0: normal scheduling; default: the nodes' own, 50)",
     )
+    parser.add_argument(
+        "--continue-without-bag",
+        action="store_true",
+        help="with --sim/--emulated-rig: if the recorder dies or cannot write (disk full), go "
+        "on with the run instead of stopping it (the report still says what went unrecorded)",
+    )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument(
         "--live",
@@ -163,9 +194,12 @@ def main(argv: list[str] | None = None) -> int:
     # launched.
     bag_path = run_dir / "bag" if args.sim or args.emulated_rig else None
     local = None
+    reserved: dict[str, ReservedFile] = {}
+    report_bytes = 0
     if bag_path is not None:
         try:
             prepare_local_graph(args)
+            report_bytes = _check_room(args, trajectory, bag_path)
         except CatheterError as exc:
             print(f"follow_trajectory: {exc}", file=sys.stderr)
             return EXIT_REFUSED
@@ -212,8 +246,16 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"follow_trajectory: {exc}", file=sys.stderr)
                 return EXIT_GRAPH
             print(f"follow_trajectory: live view: Foxglove -> Open connection -> {live.url}")
-        return _run(args, trajectory, run_dir, bag_path, local, interrupt=interrupt)
+        if bag_path is not None:
+            try:
+                reserved = _reserve(run_dir, report_bytes)
+            except OSError as exc:
+                print(f"follow_trajectory: cannot write in {run_dir}: {exc}", file=sys.stderr)
+                return EXIT_REFUSED
+        return _run(args, trajectory, run_dir, bag_path, local, interrupt=interrupt, files=reserved)
     finally:
+        for held in reserved.values():
+            held.discard()  # a run that ended before its report leaves no placeholder
         if live is not None:
             print(live.stop())
         if local is not None:
@@ -222,6 +264,36 @@ def main(argv: list[str] | None = None) -> int:
             print(f"Bag: {bag_path}")
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+
+
+def _check_room(args: argparse.Namespace, trajectory: _Trajectory, bag_path: Path) -> int:
+    """Refuse a disk without room for the run's bag, report and plot; report.json's share.
+
+    Raises:
+        DiskSpaceError: the disk lacks room (the figures and the path are named).
+    """
+    from catheter_control import tracking_report as report  # loaded with the run, see _run
+
+    duration_s = trajectory.plan.duration_s + START_STOP_S
+    report_bytes = report.REPORT_RESERVE_BYTES + int(report.REPORT_BYTES_PER_S * duration_s)
+    need = need_for(
+        bag_path,
+        duration_s,
+        contract_streams(control_rate_hz=args.control_rate_hz),
+        extra_bytes=report_bytes + report.PLOT_RESERVE_BYTES + LOG_BYTES,
+    )
+    check_free_space(need)
+    return report_bytes
+
+
+def _reserve(run_dir: Path, report_bytes: int) -> dict[str, ReservedFile]:
+    """Hold report.json's and the plot's space now, so that a disk full later keeps them."""
+    from catheter_control import tracking_report as report
+
+    return {
+        "report": report.ReservedFile(run_dir / "report.json", report_bytes),
+        "plot": report.ReservedFile(run_dir / "tracking.png", report.PLOT_RESERVE_BYTES),
+    }
 
 
 def _load(args: argparse.Namespace) -> _Trajectory:
@@ -253,10 +325,13 @@ def _run(
     local: LocalGraph | None,
     *,
     interrupt: threading.Event,
+    files: dict[str, ReservedFile],
 ) -> int:
     """Follow the trajectory, then score and report it; the exit code."""
     # Imported here, not at the top: the run loads the report's matplotlib (about 2 s),
     # which a refused trajectory, or a local graph that fails to start, should not wait for.
+    from catheter_control.recording_watch import RecordingWatch
+    from catheter_control.tracking_report import RunRecord
     from catheter_control.trajectory_client import (
         GoalRefusedError,
         GraphNotReadyError,
@@ -264,8 +339,17 @@ def _run(
         follow,
     )
 
+    record = RunRecord()
+    watch = None
+    if bag_path is not None:
+        watch = RecordingWatch(
+            bag_path,
+            local.graph if local is not None else None,
+            record,
+            continue_without_bag=args.continue_without_bag,
+        )
     try:
-        record = follow(
+        follow(
             trajectory.plan,
             namespace=args.namespace,
             ros_args=args.ros_args,
@@ -275,6 +359,8 @@ def _run(
             show_progress=not args.no_progress,
             lead_s=trajectory.lead_s,
             interrupt=interrupt,
+            watch=watch.check if watch is not None else None,
+            record=record,
         )
     except RunInterruptedError as exc:
         print(f"follow_trajectory: {exc}", file=sys.stderr)
@@ -285,25 +371,54 @@ def _run(
     except GraphNotReadyError as exc:
         print(f"follow_trajectory: {exc}", file=sys.stderr)
         return EXIT_GRAPH
-    return _report(record, trajectory, run_dir, bag_path)
+    if watch is not None:
+        now_ns, now_s = time.time_ns(), time.monotonic()
+        start_ns = (
+            None
+            if record.started_at_s is None
+            else now_ns - int((now_s - record.started_at_s) * 1e9)
+        )
+        record.recording = watch.finish(now_ns, start_ns)
+    return _report(record, trajectory, run_dir, bag_path, files)
+
+
+def _write_out(path: Path, data: bytes, reserved: ReservedFile | None) -> str:
+    """Write a run file (into its reserved space if it has one); '' or what went wrong."""
+    if reserved is not None:
+        return reserved.write(data)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(data)
+    except OSError as exc:
+        return f"could not write {path}: {exc.strerror or exc}"
+    return ""
 
 
 def _report(
-    record: RunRecord, trajectory: _Trajectory, run_dir: Path, bag_path: Path | None
+    record: RunRecord,
+    trajectory: _Trajectory,
+    run_dir: Path,
+    bag_path: Path | None,
+    files: dict[str, ReservedFile] | None = None,
 ) -> int:
-    """Score the run, print the report, save the plot and report.json; the exit code."""
+    """Score the run, print the report, save report.json and the plot; the exit code.
+
+    report.json is written whatever the run came to (with null metrics when nothing could be
+    scored); neither file failing to write (a full disk) changes the exit code: it is said.
+    """
     from catheter_control import tracking_report as report  # loaded with the run, see _run
 
+    files = files or {}
     plan, lead_s = trajectory.plan, trajectory.lead_s
+    result = None
+    unscored = ""
     try:
         result = report.score_record(record, plan.duration_s, lead_s)
     except report.TrackingError as exc:
+        unscored = str(exc)
         print(f"follow_trajectory: cannot score the run: {exc}", file=sys.stderr)
-        if record.interrupted:
-            print(f"follow_trajectory: {record.interrupted}", file=sys.stderr)
-            return EXIT_INTERRUPTED
-        return EXIT_STOPPED if record.stopped else EXIT_GRAPH
-    print(result.text(plan.name))
+    if result is not None:
+        print(result.text(plan.name))
     summary = report.RunSummary.of(record)
     print(report.timing_text(summary.timing))
     controller = summary.controller_text()
@@ -312,14 +427,35 @@ def _report(
     losses = report.sample_losses(record, bag_path)
     for line in losses.said:
         print(line, file=sys.stderr)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    plot = report.save_plot(result, run_dir / "tracking.png", f"{plan.name}: desired vs measured")
     facts = report.run_facts(
         record, summary, losses, trajectory=plan.name, bag_path=bag_path, lead_s=lead_s
     )
-    report.save_json(result, run_dir / "report.json", facts)
-    print(f"Plot: {plot}")
-    print(f"Report: {run_dir / 'report.json'}")
+    if unscored:
+        facts["unscored"] = unscored
+    text = report.report_json(result, facts)
+    json_path = run_dir / "report.json"
+    problem = _write_out(json_path, text.encode(), files.get("report"))
+    if problem:
+        # Nothing lost without a word: the report goes to the terminal instead.
+        print(f"follow_trajectory: {problem}; the report follows:\n{text}", file=sys.stderr)
+    else:
+        print(f"Report: {json_path}")
+    plot_path = run_dir / "tracking.png"
+    if result is None:
+        print("follow_trajectory: no plot: nothing was scored", file=sys.stderr)
+    else:
+        try:
+            png = report.plot_png(result, f"{plan.name}: desired vs measured")
+        except (OSError, ValueError) as exc:
+            problem = f"could not draw the plot: {exc}"
+        else:
+            problem = _write_out(plot_path, png, files.get("plot"))
+        if problem:
+            print(f"follow_trajectory: {problem} (report.json has the scores)", file=sys.stderr)
+        else:
+            print(f"Plot: {plot_path}")
+    if result is None and not (record.interrupted or record.stopped):
+        return EXIT_GRAPH
     if record.interrupted:
         print(f"follow_trajectory: {record.interrupted} (scored up to there)", file=sys.stderr)
         return EXIT_INTERRUPTED

@@ -11,8 +11,10 @@ facts written to ``report.json``.
 
 from __future__ import annotations
 
+import io
 import json
 import math
+import os
 from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -140,6 +142,13 @@ def save_plot(result: TrackingResult, path: Path, title: str) -> Path:
 
     The last panel is thesis fig. 11.6: a straight line when hysteresis is compensated.
     """
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(plot_png(result, title))
+    return path
+
+
+def plot_png(result: TrackingResult, title: str) -> bytes:
+    """The run's plot (see :func:`save_plot`) as PNG bytes, drawn in memory."""
     d = rad_to_deg(result.desired_rad)
     m = rad_to_deg(result.measured_rad)
     fig = plt.figure(figsize=(12, 7), constrained_layout=True)
@@ -171,16 +180,71 @@ def save_plot(result: TrackingResult, path: Path, title: str) -> Path:
     ax_x.set_xlabel("desired [deg]")
     ax_x.set_ylabel("measured [deg]")
     ax_x.legend(loc="upper left")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    png = io.BytesIO()
+    fig.savefig(png, dpi=110, format="png")
     plt.close(fig)
-    return path
+    return png.getvalue()
 
 
 def save_json(result: TrackingResult, path: Path, extra: dict[str, object]) -> Path:
     """Metrics (degrees) and run facts as JSON."""
-    path.write_text(json.dumps({**extra, **result.to_json()}, indent=2) + "\n")
+    path.write_text(report_json(result, extra))
     return path
+
+
+def report_json(result: TrackingResult | None, extra: dict[str, object]) -> str:
+    """``report.json``'s text: the run's facts, then its metrics (null when not scored)."""
+    metrics = result.to_json() if result is not None else {"overall": None, "by_regime": None}
+    return json.dumps({**extra, **metrics}, indent=2) + "\n"
+
+
+REPORT_RESERVE_BYTES = 64_000
+"""Space held for report.json at the start of a run, beside :data:`REPORT_BYTES_PER_S`."""
+REPORT_BYTES_PER_S = 600
+"""report.json grows with the run: two timing series, one entry a second each (~250 B)."""
+PLOT_RESERVE_BYTES = 1_000_000
+"""Space held for tracking.png (a 1320 x 770 PNG of three panels: 100-300 kB)."""
+
+
+class ReservedFile:
+    """A file whose space is taken at the start of a run, and written in place at its end.
+
+    A disk that fills during the run (the recording, another program) cannot then keep the
+    run's report or plot from being written: the blocks are already the file's. The
+    placeholder is valid JSON that says the run did not finish writing its report, so a
+    tool that dies mid-run still leaves a report.json that says so.
+
+    Args:
+        path: The file to hold.
+        n_bytes: How much to hold [bytes].
+    """
+
+    def __init__(self, path: Path, n_bytes: int) -> None:
+        self.path = path
+        self.n_bytes = n_bytes
+        placeholder = b'{"outcome": "no report was written: the run did not get that far"}\n'
+        path.parent.mkdir(parents=True, exist_ok=True)
+        # Whitespace after the JSON is still valid JSON; real bytes, not a sparse hole.
+        path.write_bytes(placeholder + b" " * max(0, n_bytes - len(placeholder)))
+        self.written = False
+
+    def discard(self) -> None:
+        """Remove the placeholder if nothing was written (a run that never got to report)."""
+        if not self.written:
+            self.path.unlink(missing_ok=True)
+
+    def write(self, data: bytes) -> str:
+        """Write ``data`` in place (past the reservation if it must); '' or the problem."""
+        self.written = True  # whatever happens now, the placeholder is not to be removed
+        try:
+            with self.path.open("r+b") as stream:
+                stream.write(data)
+                stream.truncate(len(data))
+                stream.flush()
+                os.fsync(stream.fileno())
+        except OSError as exc:
+            return f"could not write {self.path}: {exc.strerror or exc}"
+        return ""
 
 
 def _floats(reports: list[dict[str, str]], key: str) -> list[float]:
@@ -320,11 +384,19 @@ class RunRecord:
     desired: Series = field(default_factory=Series)
     measured: Series = field(default_factory=Series)
     stopped: str = ""
-    """Why the compensator stopped part-way ('' if the run went to its end)."""
+    """Why the run stopped part-way ('' if it went to its end): the compensator's reason, or
+    the watch's (``stopped_by_watch``: the recorder died or cannot write)."""
+    stopped_by_watch: bool = False
     interrupted: str = ""
     """When a person interrupted the run (Ctrl-C), and what was done ('' if nobody did)."""
     recorder: Report = field(default_factory=dict)
     """The recorder's newest report."""
+    recorder_error: str = ""
+    """The recorder's newest /diagnostics message when its level was ERROR ('' otherwise):
+    it cannot write (disk full, I/O error) and records nothing more."""
+    recording: dict[str, Any] = field(default_factory=dict)
+    """What became of the recording (``recording`` in report.json): filled by
+    :class:`catheter_control.recording_watch.RecordingWatch`; empty for a run without a bag."""
     compensator: list[tuple[float, Report]] = field(default_factory=list)
     driver: list[tuple[float, Report]] = field(default_factory=list)
     """The node that received the commands: sim_hardware or valve_driver."""
@@ -445,6 +517,9 @@ def run_facts(
     return {
         "trajectory": trajectory,
         "bag": str(bag_path or ""),
+        # Whether the bag holds the whole run; if not, why, and how many seconds from when
+        # went unrecorded.
+        "recording": record.recording,
         # Why the compensator stopped part-way ('' if the run went to its end).
         "stopped": record.stopped,
         # When a person interrupted it (Ctrl-C): the score covers the run up to there.

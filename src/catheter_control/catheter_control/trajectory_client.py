@@ -16,13 +16,13 @@ import math
 import sys
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import rclpy
 from action_msgs.msg import GoalStatus
 from control_msgs.action import FollowJointTrajectory
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.action.client import ActionClient, ClientGoalHandle
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
@@ -87,6 +87,8 @@ def follow(
     show_progress: bool,
     lead_s: float,
     interrupt: threading.Event | None = None,
+    watch: Callable[[], str] | None = None,
+    record: RunRecord | None = None,
 ) -> RunRecord:
     """Run ``plan`` on the graph in ``namespace`` and return everything heard.
 
@@ -104,6 +106,12 @@ def follow(
             goal is sent the run ends with :class:`RunInterruptedError`; after, the goal is
             cancelled (the compensator ramps down), the ramp is recorded and the partial
             record returned with ``interrupted`` saying when.
+        watch: Called at every spin of the run; a reason ('' while all is well) stops it as
+            the compensator's own stops do: the goal is cancelled (the compensator ramps
+            down), the run is scored up to there and ``stopped`` says why (the recorder died
+            or cannot write: :class:`catheter_control.recording_watch.RecordingWatch`).
+        record: Where to keep what is heard (a watch reads the recorder's reports there);
+            None: a new one.
 
     Raises:
         GraphNotReadyError: the graph did not come up within ``timeout_s``, a started node
@@ -111,7 +119,7 @@ def follow(
         GoalRefusedError: the compensator refused the trajectory.
         RunInterruptedError: interrupted before the goal was sent.
     """
-    record = RunRecord()
+    record = RunRecord() if record is None else record
     interrupt = interrupt or threading.Event()
     use_loopback_profile()
     with rclpy.init(
@@ -124,8 +132,8 @@ def follow(
         client.wait_for_graph(graph)
         if wait_for_recorder:
             client.wait_for_recorder()
-        client.run(plan, show_progress=show_progress, lead_s=lead_s)
-        if record.stopped:
+        client.run(plan, show_progress=show_progress, lead_s=lead_s, watch=watch)
+        if record.stopped and not record.stopped_by_watch:  # the watch said its own
             print(f"follow_trajectory: compensator: {record.stopped}", file=sys.stderr)
         if not record.interrupted:
             client.wait_for_last_reports()
@@ -167,6 +175,8 @@ class _Client:
                     record.driver.append((now, values))
                 elif status.name.endswith("recorder"):
                     record.recorder = values
+                    error = status.level == DiagnosticStatus.ERROR
+                    record.recorder_error = status.message if error else ""
 
         # The stamps stay `ns * 1e-9`, not units.ns_to_s (ns / 1e9): the two differ in the
         # last bit for about half of all stamps, and scores are compared across versions.
@@ -258,7 +268,14 @@ class _Client:
             return "goal cancelled, the compensator ramped down"
         return f"goal cancelled, no result within {_CANCEL_WAIT_S:g} s"
 
-    def run(self, plan: TrajectoryPlan, *, show_progress: bool, lead_s: float) -> None:
+    def run(
+        self,
+        plan: TrajectoryPlan,
+        *,
+        show_progress: bool,
+        lead_s: float,
+        watch: Callable[[], str] | None = None,
+    ) -> None:
         """Send the goal and spin through the trajectory and the ramp-down after it."""
         node, record = self.node, self.record
         goal = _goal(plan)
@@ -338,6 +355,15 @@ class _Client:
                 bar.close()
                 raise GoalRefusedError(f"the compensator refused the trajectory: {refusal}")
             if record.stopped:
+                break
+            reason = watch() if watch is not None and not finished else ""
+            if reason:
+                bar.close()
+                heard = len(record.desired)
+                done = self._cancel(sending, result_future)
+                record.desired.truncate(heard)  # scored up to the stop, as an interrupt is
+                record.stopped = f"stopped {plan_time_s[0]:.1f} s in: {reason}; {done}"
+                record.stopped_by_watch = True
                 break
             if self.interrupt.is_set():
                 bar.close()
