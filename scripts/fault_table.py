@@ -24,6 +24,7 @@ CATEGORIES = {
     "graph": "Simulated graph (separate processes over DDS)",
     "drivers": "Real drivers against the emulated devices (real wire protocols over ptys)",
     "offline": "Files: bags given to the lab",
+    "input": "Input to the tools and the network: trajectory files, settings, DDS sockets",
 }
 
 

@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 
 import pytest
+from fault_log import FaultRecord
 from graph_utils import Children, Probe, node_argv
 from sensor_msgs.msg import FluidPressure
 
@@ -85,14 +86,30 @@ def _sim(children: Children, name: str) -> int:
     return proc.pid
 
 
-def test_a_node_under_localhost_discovery_listens_on_loopback_only(children: Children) -> None:
+@pytest.mark.fault(
+    "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST: are a node's DDS ports open to the network?",
+    safe="the node's discovery and user ports listen on 127.0.0.1 only (Fast DDS profile)",
+    category="input",
+)
+def test_a_node_under_localhost_discovery_listens_on_loopback_only(
+    children: Children, fault: FaultRecord
+) -> None:
     pid = _sim(children, "sim_hardware")
     ports = _domain_ports(children, pid)
-    assert set(ports.values()) == {"127.0.0.1"}, ports
+    fault.check(
+        "the domain's ports bound to 127.0.0.1 only",
+        set(ports.values()) == {"127.0.0.1"},
+        str(ports),
+    )
+    fault.safe_after(0.0)
     # And it is still reachable over DDS from a participant with the built-in transports.
     with Probe(children.domain_id) as probe:
         measured = probe.subscribe(FluidPressure, PRESSURE_MEASURED.name, qos.RECORD)
-        assert probe.spin_until(lambda: len(measured) > 50, 30.0), children.all_logs()
+        fault.check(
+            "still heard over DDS by a participant without the profile",
+            probe.spin_until(lambda: len(measured) > 50, 30.0),
+            children.all_logs(),
+        )
 
 
 def test_opting_out_keeps_fast_dds_builtin_sockets_on_every_interface(
