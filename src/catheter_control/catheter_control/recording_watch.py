@@ -167,7 +167,7 @@ class RecordingWatch:
         where = "" if into_s is None else f" ({into_s:.1f} s into the run)"
         print(
             f"{self.tool}: {unrecorded_s:.1f} s of the run went unrecorded, from "
-            f"{wall_text(from_ns)}{where} to its end: {failure.reason}",
+            f"{wall_text(from_ns)}{where} to its end (the bag: {failure.bag_file})",
             file=sys.stderr,
             flush=True,
         )

@@ -47,6 +47,7 @@ from catheter_models.bag.messages import (
     range_cdr,
 )
 from catheter_models.bag.metadata import (
+    METADATA_FILE,
     STREAM_QOS,
     BagSummary,
     QosProfile,
@@ -175,7 +176,8 @@ class CloseOutcome:
             complete flush).
         until_ns: Log time of the newest message it holds [ns, epoch]; None if none.
         failure: Why writing stopped (None for a bag closed as planned).
-        note: One line for a person: what the file is and what to do with it.
+        note: One line for a person: what the file holds and what to do with it (the
+            failure is ``failure``'s to say).
     """
 
     finished: bool
@@ -551,9 +553,11 @@ class BagRecorder:
             )
         except OSError as exc:
             problems.append(
-                f"metadata.yaml keeps its last flush's custom_data ({exc.strerror}): the "
-                "recorder's loss counts are not in it"
+                f"metadata.yaml is its last flush's ({exc.strerror}): the loss counts since "
+                "are not in it"
             )
+            # What the failed rewrite left (empty on a full disk) is not part of the bag.
+            (self.path / f".{METADATA_FILE}.tmp").unlink(missing_ok=True)
         until_ns = kept.end_time_ns if kept.message_count else None
         when = (
             "nothing"
@@ -562,8 +566,8 @@ class BagRecorder:
             + dt.datetime.fromtimestamp(until_ns / NS_PER_S).isoformat(timespec="milliseconds")
         )
         note = (
-            f"{self.path}: not finished ({failure.describe()}); it holds {when} (its last "
-            f"complete flush) with no footer: `catheter-lab bag repair {self.path}` recovers it"
+            f"{self.path} is not finished: it holds {when} (its last complete flush), no "
+            f"footer; `catheter-lab bag repair {self.path}` recovers it"
         )
         if problems:
             note += "; " + "; ".join(problems)
