@@ -123,7 +123,7 @@ def test_a_full_disk_stops_the_recorder_says_why_at_once_and_keeps_the_bag(
     assert not outcome.finished and node.writer.closed
     # /diagnostics ERROR, published by the writer thread at the failure (nothing spins here).
     published = node.published.statuses
-    assert published, "no status was published at the failure"
+    assert _wait(lambda: bool(published)), "no status was published at the failure"
     status = published[-1]
     values = {kv.key: kv.value for kv in status.values}
     assert status.level == DiagnosticStatus.ERROR
@@ -162,6 +162,7 @@ def test_any_error_in_the_writer_thread_finishes_the_bag_and_says_so(
     assert _wait(lambda: node.outcome is not None), "the writer did not stop on the error"
     assert node.outcome is not None and node.outcome.finished  # whole: summary and footer
     assert node.outcome.messages == 200
+    assert _wait(lambda: bool(node.published.statuses)), "no status at the failure"
     status = node.published.statuses[-1]
     assert status.level == DiagnosticStatus.ERROR
     assert "RuntimeError('a bug in the writer')" in status.message
