@@ -274,7 +274,7 @@ def _cmd_tune(args: argparse.Namespace) -> int:
 def _reseal(args: argparse.Namespace) -> int:
     """``tune --reseal FILE``: keep a deliberate edit of a gains file, after checking it."""
     from catheter_models.errors import ParameterError
-    from catheter_models.feedback.seal import reseal
+    from catheter_models.feedback.reseal import reseal
 
     if args.bags or args.output is not None:
         raise ParameterError("--reseal takes a gains file alone (no BAG, no -o)")

@@ -27,13 +27,8 @@ from catheter_models.contract import (
 )
 from catheter_models.errors import ParameterError
 from catheter_models.feedback import GAINS_FILE, FeedbackGains
-from catheter_models.feedback.seal import (
-    SEAL_KEY,
-    FeedbackFileError,
-    load_checked,
-    reseal,
-    write_sealed,
-)
+from catheter_models.feedback.reseal import reseal
+from catheter_models.feedback.seal import SEAL_KEY, FeedbackFileError
 from catheter_models.feedback.tune import LoopModel, design, margins
 
 # A loop like the simulated rig's (15 deg/bar, fast) with a little dead time and lag, so the
@@ -71,12 +66,12 @@ def _edit(path: Path, **changes: Any) -> None:
 def _sealed_with(gains: FeedbackGains, directory: Path, field: str, value: float) -> Path:
     """``gains`` with one value changed, sealed by the tool (a seal that holds)."""
     changes: dict[str, Any] = {field: value}
-    return write_sealed(dataclasses.replace(gains, **changes), directory)
+    return dataclasses.replace(gains, **changes).save(directory)
 
 
 def _refusal(path: Path) -> str:
     with pytest.raises(FeedbackFileError) as info:
-        load_checked(path)
+        FeedbackGains.load(path)
     return str(info.value)
 
 
@@ -217,12 +212,12 @@ def test_a_deliberate_edit_is_kept_only_through_reseal(
 ) -> None:
     _edit(tuned_file, kp_pa_per_rad=1.4 * tuned.kp_pa_per_rad)
     with pytest.raises(FeedbackFileError, match="does not match"):
-        load_checked(tuned_file)
+        FeedbackGains.load(tuned_file)
     with pytest.raises(ParameterError, match="--reason"):
         reseal(tuned_file, " ")
     path, _, found = reseal(tuned_file, "a stiffer catheter, checked on the bench")
     assert path == tuned_file
-    loaded = load_checked(tuned_file)
+    loaded = FeedbackGains.load(tuned_file)
     assert loaded.kp_pa_per_rad == pytest.approx(1.4 * tuned.kp_pa_per_rad)
     entry = loaded.tuning["resealed"][-1]
     assert entry["reason"] == "a stiffer catheter, checked on the bench"
@@ -247,7 +242,7 @@ def test_reseal_refuses_the_envelope_and_a_loop_it_would_destabilise(
     with pytest.raises(FeedbackFileError, match="on the recorded loop these gains"):
         reseal(tuned_file, "smoother")
     with pytest.raises(FeedbackFileError, match="does not match"):
-        load_checked(tuned_file)  # nothing was written
+        FeedbackGains.load(tuned_file)  # nothing was written
 
 
 def test_the_cli_reseals_and_refuses_with_exit_2(
@@ -262,7 +257,9 @@ def test_the_cli_reseals_and_refuses_with_exit_2(
         lab_main(["tune", "--reseal", str(tuned_file), "--reason", "softer integral"])
     assert not done.value.code, capsys.readouterr().err
     assert "resealed" in capsys.readouterr().out
-    assert load_checked(tuned_file).ki_pa_per_rad_s == pytest.approx(0.8 * tuned.ki_pa_per_rad_s)
+    assert FeedbackGains.load(tuned_file).ki_pa_per_rad_s == pytest.approx(
+        0.8 * tuned.ki_pa_per_rad_s
+    )
     with pytest.raises(SystemExit) as done:
         lab_main(["tune"])
     assert done.value.code == 2

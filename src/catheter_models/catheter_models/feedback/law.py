@@ -36,13 +36,15 @@ foreign simulator, or a real rig driven by hand. The compensator node uses
 
 from __future__ import annotations
 
+import json
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 from catheter_models.contract import FEEDBACK_AUTHORITY_PA, FEEDBACK_AUTHORITY_TIMEOUT_S
 from catheter_models.errors import ParameterError
+from catheter_models.feedback.seal import SEAL_KEY, check, write_sealed
 
 GAINS_FILE = "feedback.json"
 OPENING_ERROR_RAD = math.radians(0.2)
@@ -128,9 +130,46 @@ class FeedbackGains:
         (:mod:`catheter_models.feedback.seal`); gains made by hand are for :class:`ClosedLoop`
         offline, not for a file the compensator runs.
         """
-        from catheter_models.feedback.seal import write_sealed
+        return write_sealed(asdict(self), Path(directory) / GAINS_FILE)
 
-        return write_sealed(self, Path(directory) / GAINS_FILE)
+    @classmethod
+    def read(cls, path: Path) -> tuple[Path, dict[str, Any], FeedbackGains]:
+        """The file (``path`` or the ``feedback.json`` in it), its content, and its gains.
+
+        Each value is checked on its own here; the seal, the tuned range and the envelope are
+        :meth:`load`'s.
+
+        Raises:
+            ParameterError: missing file, not JSON, unknown or misspelt keys, or a gain out
+                of range.
+        """
+        path = Path(path)
+        if path.is_dir():
+            path = path / GAINS_FILE
+        try:
+            raw = json.loads(path.read_text())
+        except FileNotFoundError:
+            raise ParameterError(f"no feedback gains at {path}") from None
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ParameterError(f"{path}: cannot be read ({exc})") from None
+        except json.JSONDecodeError as exc:
+            raise ParameterError(f"{path}: not JSON ({exc})") from None
+        if not isinstance(raw, dict):
+            raise ParameterError(f"{path}: expected an object of gains")
+        body = {k: v for k, v in raw.items() if k != SEAL_KEY}
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(body) - known)
+        if unknown:
+            raise ParameterError(
+                f"{path}: unknown feedback keys {', '.join(unknown)}; "
+                f"known: {', '.join(sorted(known | {SEAL_KEY}))}"
+            )
+        if not isinstance(body.get("tuning", {}), dict):
+            raise ParameterError(f"{path}: tuning must be an object")
+        try:
+            return path, raw, cls(**body)
+        except TypeError as exc:  # a required gain missing
+            raise ParameterError(f"{path}: {exc}") from None
 
     @classmethod
     def load(cls, path: Path) -> FeedbackGains:
@@ -141,9 +180,9 @@ class FeedbackGains:
             FeedbackFileError: unsealed, its seal broken, a gain outside its tuned range, or
                 an authority or timeout beyond the safety envelope (every problem named).
         """
-        from catheter_models.feedback.seal import load_checked
-
-        return load_checked(path)
+        path, raw, gains = cls.read(path)
+        check(path, raw, asdict(gains))
+        return gains
 
 
 class PIDFeedback:
