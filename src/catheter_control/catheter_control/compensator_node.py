@@ -21,7 +21,10 @@ has been silent for ``sensor_timeout_s``.
 
 With ``feedback:=pi`` the command also corrects on the measured bend (``tip/angle``), with
 the gains of ``feedback_gains`` (a ``feedback.json`` written by ``catheter-lab tune``; ''
-takes the one in ``model_dir``, or the shipped one tuned on the simulated rig). The tip
+takes the one in ``model_dir``, or the shipped one tuned on the simulated rig). The file is
+refused at configure, each problem named, when its seal does not match (edited by hand) or it
+has none, when a gain lies outside the range its tuning recorded, or when its authority or
+authority timeout is beyond the contract's envelope (``catheter_models.feedback.seal``). The tip
 angle is then required whatever ``require_tip_angle`` says: feedback never runs on a stale
 stream, and a non-finite sample holds it (counted on ``/diagnostics``).
 """
