@@ -49,6 +49,7 @@ from catheter_control.commission_rig import (
     RigChoice,
     RigError,
     check_response,
+    recording_need,
 )
 from catheter_control.graph_domain import (
     GraphConflictError,
@@ -62,17 +63,21 @@ from catheter_control.trajectory import (
     preset_knots,
     with_lead_in,
 )
+from catheter_models.bag.space import DiskSpaceError, check_free_space
 from catheter_models.contract import CONTROL_RATE_HZ, DEFAULT_NAMESPACE
 from catheter_models.errors import CatheterError
 from catheter_models.lab.signals import lab_training_specs
 from catheter_models.signals import TEST_TRAJECTORIES
 
 EXIT_REFUSED = 2
-"""The command line or the output directory was refused (the reason is named)."""
+"""The command line or the output directory was refused (the reason is named), or the
+output directory's disk lacks room for the recordings still to make (the figures named)."""
 EXIT_GRAPH = 3
 """The rig did not come up."""
 EXIT_STOPPED = 4
-"""A step failed or the rig does not respond: stopped with the reason, nothing commissioned."""
+"""A step failed or the rig does not respond: stopped with the reason, nothing commissioned.
+This includes a recording whose recorder died or could not write (excite is stopped, the
+pressure ramped down, the seconds unrecorded said): a rerun records it again."""
 EXIT_BELOW_TARGET = 5
 """Commissioned (the best candidate is written), but it misses the tracking target on at
 least one trajectory; the report names where."""
@@ -289,6 +294,14 @@ class Commission:
     def run(self) -> int:
         """Every step in order; the exit code (raises on a failed step)."""
         signals = protocol_signals(self.protocol)
+        # Refused before the rig moves: a disk that fills mid-recording costs the recording.
+        to_record = [
+            signals[part]
+            for part in ("train", "test")
+            if not (self.state.done(f"record_{part}") and self.bag(part).exists())
+        ]
+        if to_record:
+            check_free_space(recording_need(self.out_dir / "bags", to_record))
         for part in ("train", "test"):
             self.step(
                 f"record_{part}",
@@ -639,7 +652,7 @@ def main(argv: list[str] | None = None) -> int:
         code = job.run()
     except KeyboardInterrupt:
         failure, code = "interrupted (Ctrl-C); rerun the same command to go on", EXIT_INTERRUPTED
-    except GraphConflictError as exc:
+    except (GraphConflictError, DiskSpaceError) as exc:
         failure, code = str(exc), EXIT_REFUSED
     except RigError as exc:
         failure = str(exc)

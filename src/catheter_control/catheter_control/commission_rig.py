@@ -6,6 +6,12 @@ and ``excite`` for each excitation, then a compensator per candidate for the tra
 So the hardware is one :class:`~catheter_control.bringup.ProcessGraph` (or the drivers a
 person started on the rig), and each step starts and stops its own nodes on it, exactly the
 processes a person would start by hand (docs/commissioning.md lists them).
+
+A recording is watched as ``follow_trajectory``'s is
+(:class:`~catheter_control.recording_watch.RecordingWatch`): a recorder that exits or reports
+ERROR (it cannot write) stops ``excite`` at once (it ramps the pressure down) and fails the
+step with the reason and the seconds that went unrecorded from when. There is no going on
+without a bag here: a recording step's bag is all it is for.
 """
 
 from __future__ import annotations
@@ -29,9 +35,11 @@ from catheter_control.bringup import (
     sim_graph_specs,
 )
 from catheter_control.progress_bar import ProgressBar
+from catheter_control.recording_watch import RecordingWatch
 from catheter_control.tracking_report import RunRecord
 from catheter_control.trajectory import TrajectoryPlan
 from catheter_models.bag import load_bag
+from catheter_models.bag.space import SpaceNeed, contract_streams, need_for
 from catheter_models.contract import CONTROL_RATE_HZ, SENSOR_RATE_HZ
 from catheter_models.errors import CatheterError, GraphConflictError
 from catheter_models.geometry import Calibration
@@ -142,6 +150,17 @@ def signal_duration_s(signals: Sequence[str], rate_hz: float = CONTROL_RATE_HZ) 
         spec = lab_spec(name) or get_preset(name)
         total += spec.generate(rate_hz).values_si.size / rate_hz + _EXCITE_TAIL_S
     return total
+
+
+RECORDING_START_STOP_S = 60.0
+"""What a recording records beyond its excitation, for the free-space check [s]: the recorder
+and excite finding the rig (up to _EXCITE_START_WAIT_S), and the stop."""
+
+
+def recording_need(bags_dir: Path, recordings: Sequence[Sequence[str]]) -> SpaceNeed:
+    """The free space the recordings (each a list of signals) take in ``bags_dir``."""
+    duration_s = sum(signal_duration_s(s) + RECORDING_START_STOP_S for s in recordings)
+    return need_for(bags_dir, duration_s, contract_streams())
 
 
 class CommissionRig:
@@ -303,27 +322,45 @@ class CommissionRig:
         ]
         duration_s = signal_duration_s(signals)
         bar = ProgressBar(duration_s, show_progress)
+        heard = RunRecord()  # the recorder's /diagnostics land here
+        watch = RecordingWatch(bag_path, graph, heard, tool="commission")
+        failed = ""
+        start_ns = time.time_ns()
         try:
-            with excite_log.open("wb") as log:
+            with (
+                excite_log.open("wb") as log,
+                _DiagnosticsListener(self.choice.namespace, heard) as listener,
+            ):
                 proc = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT)
                 start = time.monotonic()
                 limit_s = duration_s + _EXCITE_START_WAIT_S + 30.0
                 try:
                     while proc.poll() is None:
-                        time.sleep(0.2)
+                        listener.spin(0.2)
                         bar.show(time.monotonic() - start)
-                        self._check_alive(graph)
+                        self._check_alive()
+                        failed = watch.check()
+                        if failed:
+                            break  # excite is stopped below: it ramps the pressure down
                         if time.monotonic() - start > limit_s:
                             raise RigError(
                                 f"excite did not finish {signals} within {limit_s:.0f} s"
                             )
                 finally:
                     if proc.poll() is None:
-                        proc.terminate()
+                        proc.terminate()  # excite ramps down before it exits
                         proc.wait(10.0)
         finally:
             bar.close()
+            if failed:
+                facts = watch.finish(time.time_ns(), start_ns)
             graph.stop()
+        if failed:
+            raise RigError(
+                f"{bag_path.name}: {failed}; excite was stopped and ramped the pressure down; "
+                f"{facts['unrecorded_s']:.1f} s of the excitation went unrecorded from "
+                f"{facts['unrecorded_from']}; the step is to be run again (rerun the command)"
+            )
         if proc.returncode != 0:
             tail = "\n".join(excite_log.read_text(errors="replace").splitlines()[-5:])
             raise RigError(f"excite ended with code {proc.returncode}:\n{tail}")
@@ -379,6 +416,52 @@ class CommissionRig:
         finally:
             graph.stop()  # deactivates the compensator first: it ramps the pressure down
             time.sleep(_SETTLE_S)
+
+
+class _DiagnosticsListener:
+    """A node that keeps the recorder's newest /diagnostics report in ``record``."""
+
+    def __init__(self, namespace: str, record: RunRecord) -> None:
+        self.namespace = namespace
+        self.record = record
+
+    def __enter__(self) -> _DiagnosticsListener:
+        import rclpy
+        from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+        from rclpy.node import Node
+        from rclpy.signals import SignalHandlerOptions
+
+        from catheter_models.contract import DIAGNOSTICS
+        from catheter_ros.dds_profile import use_loopback_profile
+
+        use_loopback_profile()
+        self._rclpy = rclpy
+        # Python's own SIGINT handling stays: Ctrl-C is commission's KeyboardInterrupt.
+        self._context = rclpy.init(
+            args=["commission", "--ros-args", "-r", f"__ns:={self.namespace}"],
+            signal_handler_options=SignalHandlerOptions.NO,
+        )
+        self._context.__enter__()
+        self.node = Node("commission_recording_watch")
+        record = self.record
+
+        def on_diag(msg: DiagnosticArray) -> None:
+            for status in msg.status:
+                if status.name.endswith("recorder"):
+                    record.recorder = {kv.key: kv.value for kv in status.values}
+                    error = status.level == DiagnosticStatus.ERROR
+                    record.recorder_error = status.message if error else ""
+
+        self.node.create_subscription(DiagnosticArray, DIAGNOSTICS.name, on_diag, 10)
+        return self
+
+    def spin(self, timeout_s: float) -> None:
+        """Take what arrived, waiting up to ``timeout_s``."""
+        self._rclpy.spin_once(self.node, timeout_sec=timeout_s)
+
+    def __exit__(self, *exc: object) -> None:
+        self.node.destroy_node()
+        self._context.__exit__(None, None, None)
 
 
 @dataclass(frozen=True)

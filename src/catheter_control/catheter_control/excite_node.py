@@ -111,6 +111,9 @@ class ExciteNode(LoopNode):
             ramp = np.linspace(last_pa, 0.0, n_ramp + 1)[1:] if n_ramp > 0 else np.zeros(0)
             pieces += [signal.values_si, ramp, tail]
         self.values_pa = np.concatenate(pieces)
+        self.ramp_pa_per_s = ramp_pa_per_s
+        self._sent_i = -1
+        """Index of the newest sample published (loop thread); -1 before the first."""
         self.spec_names = [spec.name for spec in specs]
         self.signal_name = name
         self.done = threading.Event()
@@ -154,9 +157,28 @@ class ExciteNode(LoopNode):
         self._pub.publish(
             messages.fluid_pressure(float(self.values_pa[i]), stamp_ns, "", self.ambient_pa)
         )
+        self._sent_i = i
 
     def close(self) -> None:
-        """Stop sending (idempotent)."""
+        """Stop sending (idempotent); stopped mid-signal, ramp to zero first.
+
+        A stop request (SIGINT, SIGTERM: a person, or ``commission`` when its recording
+        failed) mid-signal ends with the pressure ramped down at ``ramp_down_pa_per_s``, as
+        the signals' own ends are, not with the valve held until the driver's watchdog vents.
+        """
+        i = self._sent_i
+        if self._first_k is not None and not self.done.is_set() and i >= 0:
+            last_pa = float(self.values_pa[i])
+            n_ramp = int(np.ceil(last_pa / self.ramp_pa_per_s * self.rate_hz))
+            if n_ramp > 0:
+                ramp = np.linspace(last_pa, 0.0, n_ramp + 1)[1:]
+                # One reference swap: the loop reads the new array from its next tick on.
+                self.values_pa = np.concatenate([self.values_pa[: i + 1], ramp])
+                self.get_logger().warning(
+                    f"stopped mid-signal at {last_pa / 1e5:.2f} bar: ramping down over "
+                    f"{n_ramp / self.rate_hz:.2f} s"
+                )
+                self.done.wait(n_ramp / self.rate_hz + 1.0)
         self.loop.stop()
 
 
