@@ -182,13 +182,18 @@ def test_chopped_at_any_offset_recovers_complete_chunks(tmp_path: Path) -> None:
             TruncatedBagError, match=f" {expected} complete messages are recoverable"
         ):
             load_bag(bag)
+        if expected == 0:
+            # Nothing whole to copy (0 bytes, inside the magic or the header, the first
+            # chunk cut): refused, and no empty "repaired" bag is written.
+            with pytest.raises(BagError, match="nothing to recover"):
+                repair_bag(bag)
+            assert not (tmp_path / f"cut{cut}_repaired").exists()
+            continue
         report = repair_bag(bag)
         assert report.message_count == expected, cut
         assert 0 <= report.bytes_discarded <= cut
         if cut == last_flush:
             assert report.bytes_discarded == 0
-        if expected == 0:
-            continue
         rosbags_counts, mcap_counts = _reader_counts(report.output)
         assert rosbags_counts == mcap_counts
         assert sum(rosbags_counts.values()) == expected

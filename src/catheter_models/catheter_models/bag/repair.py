@@ -1,15 +1,23 @@
-"""Recovering a bag whose recorder was killed: every complete message, into a new bag.
+"""Recovering a bag: every message that can be read whole, into a new bag, and what was lost.
 
 The original is never modified. The new bag keeps the original's message bytes, log and publish
 times, message definitions, QoS and ``custom_data``, and says in ``custom_data`` where it came
 from and what was lost.
+
+It reads with ``verify`` (past damage, chunk by chunk), so it tells a truncated bag (a killed
+recorder, a full disk: the file stops) from a corrupt one (a chunk that fails its CRC, does not
+decompress or is not framed; the chunk's messages are lost and the rest recovered), says how
+many messages were lost on which topic and from when, and says when chunks could not be
+verified (CRC 0). A bag is called whole only when nothing was lost and every chunk verified.
+A file with nothing to recover (0 bytes, no MCAP magic or header, no complete message) is
+refused, and no bag is written.
 """
 
 from __future__ import annotations
 
 import shutil
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
 
@@ -17,7 +25,7 @@ from mcap.records import Channel, Message, Schema
 from mcap.well_known import MessageEncoding
 
 from catheter_models.bag.metadata import BagLayout, custom_data_of, locate_bag
-from catheter_models.bag.scan import McapScan, scan_mcap
+from catheter_models.bag.verify import BagCheck, verify_bag
 from catheter_models.bag.writer import BagRecorder, SchemaText
 from catheter_models.errors import BagError
 
@@ -29,10 +37,16 @@ class RepairReport:
     Attributes:
         source: The bag that was read (unchanged).
         output: The new, complete bag directory.
-        was_complete: True if every source file already had its footer (nothing was lost).
+        was_complete: True only if the source was whole: every file had its footer, no
+            record or chunk was damaged, no message was lost, metadata.yaml agreed.
         messages_per_topic: Recovered messages by topic.
         bytes_discarded: Bytes of incomplete records dropped from the ends of the files.
-        stop_reasons: Why each incomplete file's scan stopped, for a person.
+        stop_reasons: Every finding (truncation, corruption, unverified chunks, lost messages,
+            metadata.yaml disagreeing), for a person.
+        truncated: A file stopped with no footer.
+        corrupt: A record or chunk was damaged (its messages are lost).
+        lost_per_topic: Messages lost by topic.
+        unverified_chunks: Chunks copied that carry no CRC, so could not be verified.
     """
 
     source: Path
@@ -41,21 +55,42 @@ class RepairReport:
     messages_per_topic: Mapping[str, int]
     bytes_discarded: int
     stop_reasons: tuple[str, ...]
+    truncated: bool = False
+    corrupt: bool = False
+    lost_per_topic: Mapping[str, int] = field(default_factory=lambda: MappingProxyType({}))
+    unverified_chunks: int = 0
 
     @property
     def message_count(self) -> int:
         """Recovered messages, over all topics."""
         return sum(self.messages_per_topic.values())
 
+    @property
+    def lost_messages(self) -> int:
+        """Messages lost, over all topics."""
+        return sum(self.lost_per_topic.values())
+
     def describe(self) -> str:
-        """A few lines for a person at the rig."""
-        state = "was already complete" if self.was_complete else "was truncated"
+        """A few lines for a person at the rig: what it was, what was recovered and lost."""
+        states = [
+            word for word, on in (("truncated", self.truncated), ("corrupt", self.corrupt)) if on
+        ]
+        if self.was_complete and not self.unverified_chunks:
+            state = "was whole (every chunk verified, nothing lost)"
+        elif self.was_complete:
+            state = (
+                f"lost nothing that can be checked, but {self.unverified_chunks} chunk(s) carry "
+                "no CRC and could not be verified"
+            )
+        else:
+            state = "was " + (" and ".join(states) or "incomplete")
+            state += f": {self.lost_messages} messages lost" if self.lost_messages else ""
         lines = [
             f"{self.source} {state}; wrote {self.output}",
             f"recovered {self.message_count} messages, discarded {self.bytes_discarded} bytes",
         ]
         lines += [f"  {topic}: {count}" for topic, count in sorted(self.messages_per_topic.items())]
-        lines += [f"  stopped: {reason}" for reason in self.stop_reasons]
+        lines += [f"  {reason}" for reason in self.stop_reasons]
         return "\n".join(lines)
 
 
@@ -74,11 +109,13 @@ def repair_bag(path: Path | str, output: Path | str | None = None) -> RepairRepo
         output: New bag directory; must not exist. Default: ``<path>_repaired``.
 
     Returns:
-        Counts per topic and bytes discarded.
+        Counts per topic, bytes discarded, and every finding (``was_complete`` only if whole).
 
     Raises:
-        BagError: ``output`` exists, the bag is not MCAP, or a channel is not ROS 2 CDR with a
-            schema (nothing this stack could write back faithfully).
+        BagError: ``output`` exists; the bag is not MCAP; a file is empty, lacks the MCAP
+            magic or a complete header, or no complete message can be read (nothing to
+            recover: no bag is written); or a channel is not ROS 2 CDR with a schema (nothing
+            this stack could write back faithfully).
     """
     layout = locate_bag(path)
     not_mcap = [f for f in layout.storage_files if f.suffix != ".mcap"]
@@ -86,45 +123,78 @@ def repair_bag(path: Path | str, output: Path | str | None = None) -> RepairRepo
         msg = f"cannot repair {layout.path}: {[str(f) for f in not_mcap]} are not MCAP files"
         raise BagError(msg)
     target = Path(output) if output is not None else default_repair_output(layout.path)
+    if target.exists():
+        msg = f"repair output {target} already exists; choose a new directory (-o)"
+        raise BagError(msg)
+    # A first pass without writing: a file with nothing to recover is refused before any
+    # "repaired" bag exists.
+    _refuse_nothing_to_recover(layout, _check(layout))
     recorder = BagRecorder(target, custom_data=custom_data_of(layout.metadata), flush_period_s=None)
     try:
-        scans = _copy_all(recorder, layout)
-        recovered = sum(s.message_count for s in scans)
-        discarded = sum(s.bytes_discarded for s in scans)
+        check = _copy_all(recorder, layout)
+        recovered = sum(check.recovered_by_topic().values())
+        discarded = sum(f.bytes_discarded for f in check.files)
+        lost = check.lost_by_topic()
         recorder.set_custom_data("repaired_from", str(layout.path))
         recorder.set_custom_data("repair_recovered_messages", str(recovered))
         recorder.set_custom_data("repair_discarded_bytes", str(discarded))
-        recorder.close()
+        recorder.set_custom_data("repair_lost_messages", str(sum(lost.values())))
+        findings = check.lines()
+        if findings:
+            recorder.set_custom_data("repair_findings", " | ".join(findings))
+        outcome = recorder.close()
+        if not outcome.finished:
+            msg = f"the repaired bag {target} could not be finished: {outcome.note}"
+            raise BagError(msg)
     except BaseException:
         recorder.close()
         # A half-written "repaired" bag would pass for a good one; the directory is ours
         # (BagRecorder created it exclusively), so remove it.
-        shutil.rmtree(target)
+        shutil.rmtree(target, ignore_errors=True)
         raise
-    per_topic: dict[str, int] = {}
-    for scan in scans:
-        for topic, count in scan.topic_counts().items():
-            per_topic[topic] = per_topic.get(topic, 0) + count
     return RepairReport(
         source=layout.path,
         output=target,
-        was_complete=all(s.complete for s in scans),
-        messages_per_topic=MappingProxyType(per_topic),
+        was_complete=check.intact,
+        messages_per_topic=MappingProxyType(check.recovered_by_topic()),
         bytes_discarded=discarded,
-        stop_reasons=tuple(f"{s.path.name}: {s.stop_reason}" for s in scans if s.stop_reason),
+        stop_reasons=tuple(findings),
+        truncated=check.truncated,
+        corrupt=check.corrupt,
+        lost_per_topic=MappingProxyType(lost),
+        unverified_chunks=check.unverified_chunks,
     )
 
 
-def _copy_all(recorder: BagRecorder, layout: BagLayout) -> list[McapScan]:
+def _check(layout: BagLayout) -> BagCheck:
+    return verify_bag(layout.path)
+
+
+def _refuse_nothing_to_recover(layout: BagLayout, check: BagCheck) -> None:
+    headless = [f.path.name for f in check.files if not f.has_header]
+    if headless:
+        msg = (
+            f"cannot repair {layout.path}: {', '.join(headless)} ends before its MCAP header "
+            "is complete; nothing to recover (no bag written)"
+        )
+        raise BagError(msg)
+    if not sum(check.recovered_by_topic().values()):
+        said = "; ".join(check.lines()) or "the files hold no message"
+        msg = (
+            f"cannot repair {layout.path}: not one complete message can be read ({said}); "
+            "nothing to recover (no bag written)"
+        )
+        raise BagError(msg)
+
+
+def _copy_all(recorder: BagRecorder, layout: BagLayout) -> BagCheck:
     copier = _Copier(recorder, layout)
-    scans: list[McapScan] = []
-    for mcap_file in layout.mcap_files:
-        scan = scan_mcap(mcap_file, on_message=copier.copy)
-        scans.append(scan)
+    check = verify_bag(layout.path, on_message=copier.copy)
+    for f in check.files:
         # Topics whose messages were all lost still belong in the repaired bag's listing.
-        for channel in scan.channels.values():
-            copier.ensure_topic(channel, scan.schemas.get(channel.schema_id))
-    return scans
+        for channel in f.channels.values():
+            copier.ensure_topic(channel, f.schemas.get(channel.schema_id))
+    return check
 
 
 class _Copier:

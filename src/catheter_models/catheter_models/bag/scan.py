@@ -211,6 +211,13 @@ def truncated_bag_error(bag_path: Path, scans: list[McapScan]) -> TruncatedBagEr
             per_topic[topic] = per_topic.get(topic, 0) + count
     topics_text = ", ".join(f"{t}: {c}" for t, c in sorted(per_topic.items())) or "none"
     files_text = "; ".join(f"{s.path.name}: {s.stop_reason}" for s in broken)
+    if recoverable == 0:
+        msg = (
+            f"bag {bag_path} is truncated (no MCAP footer): {files_text}. 0 complete messages "
+            f"are recoverable; {discarded} bytes at the end are incomplete. There is nothing "
+            "to repair: record it again"
+        )
+        return TruncatedBagError(msg)
     msg = (
         f"bag {bag_path} is truncated (no MCAP footer; the recorder was probably killed): "
         f"{files_text}. {recoverable} complete messages are recoverable ({topics_text}); "
