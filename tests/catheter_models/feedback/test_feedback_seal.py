@@ -125,6 +125,7 @@ def test_a_broken_seal_is_refused_with_how_to_reseal(tuned_file: Path) -> None:
     _edit(tuned_file, notch_damping=0.3)
     said = _refusal(tuned_file)
     assert "feedback_sha256 does not match its content" in said
+    assert "(notch_damping 0.5 -> 0.3)" in said
     assert "re-tune" in said and f"catheter-lab tune --reseal {tuned_file}" in said
 
 
@@ -135,7 +136,14 @@ def test_an_edited_safe_range_breaks_the_seal(tuned: FeedbackGains, tuned_file: 
     raw["kp_pa_per_rad"] *= 100.0
     tuned_file.write_text(json.dumps(raw))
     said = _refusal(tuned_file)
-    assert "does not match its content" in said
+    assert "does not match its content" in said and "kp_pa_per_rad" in said
+
+
+def test_an_edited_tuning_record_alone_breaks_the_seal(tuned_file: Path) -> None:
+    raw = json.loads(tuned_file.read_text())
+    raw["tuning"]["designed_margins"]["gain_margin"] = 10.0
+    tuned_file.write_text(json.dumps(raw))
+    assert "its tuning record was edited" in _refusal(tuned_file)
 
 
 @pytest.mark.parametrize(

@@ -8,8 +8,8 @@ gains file is now what ``catheter-lab tune`` designed, or it is refused before a
   identified loop, its margins, the designed gains and the range of gains it considers safe)
   and a sha256 of the whole file (``feedback_sha256``, over canonical JSON, as a model's
   manifest is sealed). A file whose content no longer matches its seal is refused, naming the
-  file and what moved; a file with no seal (written before gains were sealed, or by hand) is
-  refused with how to re-tune it.
+  file and what moved from the tuned values; a file with no seal (written before gains were
+  sealed, or by hand) is refused with how to re-tune it.
 * **The tuned range.** ``kp``, ``ki`` and ``kd`` must lie within the factor of the designed
   values that the tuning recorded (:func:`~catheter_models.feedback.tune.safe_gain_factor`:
   the square root of the gain margin it reported). Checked on every load, sealed or not.
@@ -140,6 +140,21 @@ def range_problems(values: Mapping[str, Any], record: Mapping[str, Any]) -> list
     return problems
 
 
+def moved(values: Mapping[str, Any], record: Mapping[str, Any]) -> list[str]:
+    """Each value that differs from what was tuned (and resealed since), as 'name was -> now'."""
+    expected = dict(record["designed"])
+    for entry in record.get("resealed", []):
+        if isinstance(entry, dict) and isinstance(entry.get("changed"), dict):
+            for name, change in entry["changed"].items():
+                if isinstance(change, list) and len(change) == 2:
+                    expected[name] = change[1]
+    return [
+        f"{name} {expected[name]!r} -> {values[name]!r}"
+        for name in sorted(expected)
+        if name in values and values[name] != expected[name]
+    ]
+
+
 def check(path: Path, raw: Mapping[str, Any], values: Mapping[str, Any]) -> None:
     """Check a gains file's seal, tuned range and envelope (see the module).
 
@@ -166,9 +181,17 @@ def check(path: Path, raw: Mapping[str, Any], values: Mapping[str, Any]) -> None
             + (f", or, to keep these gains knowingly, {reseal}" if resealable else "")
         )
     elif sealed != (actual := digest(raw)):
+        changes = [] if record is None else moved(values, record)
+        what = (
+            f" ({', '.join(changes)})"
+            if changes
+            else " (no gain differs from the tuned ones: its tuning record was edited)"
+            if record is not None
+            else ""
+        )
         problems.append(
             f"its {SEAL_KEY} does not match its content (sealed {str(sealed)[:12]}..., "
-            f"content {actual[:12]}...): it was edited after catheter-lab tune wrote it; "
+            f"content {actual[:12]}...): it was edited after catheter-lab tune wrote it{what}; "
             + (
                 f"{retune}, or keep a deliberate edit by resealing it knowingly ({reseal}, "
                 "which first re-checks the gains on the recorded loop)"
