@@ -39,7 +39,7 @@ def reseal(path: Path, reason: str) -> tuple[Path, FeedbackGains, Margins]:
         FeedbackFileError: what would be refused, named.
     """
     if not reason.strip():
-        raise ParameterError("tune --reseal: say why (--reason TEXT); it is kept in the file")
+        raise ParameterError("--reseal: say why (--reason TEXT); it is kept in the file")
     path, _, gains = FeedbackGains.read(path)
     values = dataclasses.asdict(gains)
     record = tuning_record(gains.tuning)
