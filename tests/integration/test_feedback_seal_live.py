@@ -79,7 +79,7 @@ def test_an_edited_feedback_file_is_refused_at_configure_and_nothing_moves(
     fault.check("reported", all(name in said for name in FIELDS), said[-600:])
     rest = gauge_pa([m for m in measured if m.mono_s > t_start])
     fault.check(
-        "nothing moved",
+        "nothing moved (no command sent, the muscle at rest)",
         not commands and rest.size > 0 and float(np.max(np.abs(rest))) < NOISE_MARGIN_PA,
         f"{len(commands)} commands; measured up to {np.max(np.abs(rest), initial=0.0):.0f} Pa",
     )
