@@ -1,7 +1,8 @@
 """``catheter-lab``: the lab's command line.
 
-    catheter-lab bag info BAG              what a bag holds (topics, rates, metadata)
-    catheter-lab bag repair BAG [-o OUT]   recover a bag whose recorder was killed
+    catheter-lab bag info BAG              what a bag holds (topics, rates, metadata), what is
+                                           damaged or lost, whether its data is plausible
+    catheter-lab bag repair BAG [-o OUT]   recover a truncated or damaged bag into a new one
     catheter-lab simulate SIGNAL... -o BAG offline data: thesis signals through the
                                            simulated rig, written as contract bags
     catheter-lab effects                   the physical effects the plant and lab know
@@ -47,19 +48,44 @@ if TYPE_CHECKING:
     from catheter_models.plant import PlantConfig
 
 
-def _cmd_bag_info(args: argparse.Namespace) -> int:
-    from catheter_models.bag import bag_info
+EXIT_BAG_PROBLEM = 3
+"""``bag info``: the bag is truncated, damaged, lost messages, its metadata.yaml disagrees or its
+data is implausible (listed first). ``bag repair``: a new bag was written, but messages were
+lost (counted, with when). A refusal (not a bag, nothing to recover) exits 2."""
 
-    print(bag_info(args.bag))
-    return 0
+
+def _bag_verb(args: argparse.Namespace, run: Any) -> int:
+    """Run a bag verb; whatever a decoder raises becomes one line naming the bag, exit 2."""
+    try:
+        return int(run())
+    except (CatheterError, OSError):
+        raise
+    except Exception as exc:
+        # zstd, lz4, mcap and rosbags raise their own types for damaged bytes; a person gets
+        # the bag and the reason, never a traceback.
+        raise CatheterError(f"bag {args.bag} cannot be read: {type(exc).__name__}: {exc}") from None
+
+
+def _cmd_bag_info(args: argparse.Namespace) -> int:
+    from catheter_models.bag.info import inspect_bag
+
+    def run() -> int:
+        inspection = inspect_bag(args.bag)
+        print(inspection.text)
+        return EXIT_BAG_PROBLEM if inspection.problem else 0
+
+    return _bag_verb(args, run)
 
 
 def _cmd_bag_repair(args: argparse.Namespace) -> int:
     from catheter_models.bag import repair_bag
 
-    report = repair_bag(args.bag, args.output)
-    print(report.describe())
-    return 0
+    def run() -> int:
+        report = repair_bag(args.bag, args.output)
+        print(report.describe())
+        return EXIT_BAG_PROBLEM if report.lost_messages else 0
+
+    return _bag_verb(args, run)
 
 
 def _parse_effects(items: list[str]) -> dict[str, dict[str, float]]:
@@ -552,10 +578,23 @@ def build_parser() -> argparse.ArgumentParser:
 
     bag = sub.add_parser("bag", help="inspect or repair bags")
     bag_sub = bag.add_subparsers(dest="bag_command", required=True)
-    info = bag_sub.add_parser("info", help="what a bag holds")
+    info = bag_sub.add_parser(
+        "info",
+        help="what a bag holds, what is damaged or lost, whether its data is plausible",
+        description="Exit 0: whole and plausible (warnings may be printed); 3: truncated, "
+        "damaged, messages lost, metadata.yaml disagreeing or implausible data (said first); "
+        "2: not a bag.",
+    )
     info.add_argument("bag", type=Path)
     info.set_defaults(func=_cmd_bag_info)
-    repair = bag_sub.add_parser("repair", help="recover a bag whose recorder was killed")
+    repair = bag_sub.add_parser(
+        "repair",
+        help="recover a truncated or damaged bag into a new bag",
+        description="Copies every message that can be read whole into a new bag and says what "
+        "was truncated, corrupt, unverifiable or lost. Exit 0: written, no message known lost; "
+        "3: written, messages lost (counted, with when); 2: refused, nothing written (not a "
+        "bag, 0 bytes, no header, nothing whole to recover, output exists).",
+    )
     repair.add_argument("bag", type=Path)
     repair.add_argument("-o", "--output", type=Path, default=None, help="new bag directory")
     repair.set_defaults(func=_cmd_bag_repair)

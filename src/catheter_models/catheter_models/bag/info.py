@@ -3,8 +3,12 @@
 Gaps are found from the header stamps of every stream (``catheter_models.gaps``), so a bag
 that a recorder without gap counting wrote, or one written elsewhere, is judged too.
 
-A truncated bag is summarised too (from the complete records), with the repair command, since
-that is exactly when someone runs ``catheter-lab bag info``.
+A truncated or damaged bag is summarised too (from the records that can be read whole,
+``bag.verify``), with what was lost and the repair command, since that is exactly when someone
+runs ``catheter-lab bag info``. Its findings come first: truncation, corrupt chunks (which and
+when), chunks that cannot be verified (CRC 0), messages lost against the summary's statistics
+and ``metadata.yaml``, then the plausibility check's findings (``bag.plausible``), the same
+``catheter-lab train``/``compare``/``tune`` would refuse or warn about.
 """
 
 from __future__ import annotations
@@ -18,9 +22,10 @@ from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.rosbag2 import ReaderError as Rosbag2ReaderError
 
 from catheter_models.bag.messages import kilted_typestore
-from catheter_models.bag.metadata import bag_custom_data, locate_bag
-from catheter_models.bag.scan import REPAIR_COMMAND, MessageSink, has_footer, scan_mcap
-from catheter_models.errors import BagError
+from catheter_models.bag.metadata import BagLayout, bag_custom_data, locate_bag
+from catheter_models.bag.scan import REPAIR_COMMAND
+from catheter_models.bag.verify import BagCheck, MessageSink, verify_bag
+from catheter_models.errors import BagError, CatheterError
 from catheter_models.gaps import StreamGaps, header_stamp_ns, pauses_between_runs
 from catheter_models.units import NS_PER_S, ns_to_s
 
@@ -58,45 +63,107 @@ class _TopicStats:
         return None if span_ns <= 0 else (self.count - 1) * NS_PER_S / span_ns
 
 
-def bag_info(path: Path | str) -> str:
-    """Summarise a bag directory or ``.mcap`` file as text.
+@dataclass(frozen=True)
+class BagInspection:
+    """What ``catheter-lab bag info`` prints, and whether it found a problem.
 
-    Rates are mean receive (log-time) rates per topic [Hz]; the duration is from the first to
-    the last log time [s].
+    Attributes:
+        text: The summary, findings first.
+        problem: True if the bag as it is loses or refuses data: truncated, corrupt, messages
+            lost, ``metadata.yaml`` disagreeing, or a plausibility refusal. Chunks that cannot
+            be verified and plausibility warnings are said but are not problems.
+    """
+
+    text: str
+    problem: bool
+
+
+def bag_info(path: Path | str) -> str:
+    """Summarise a bag directory or ``.mcap`` file as text (see :func:`inspect_bag`).
 
     Raises:
-        BagError: The path is not a readable bag.
+        BagError: The path is not a bag, or an MCAP file in it is empty or not MCAP.
+    """
+    return inspect_bag(path).text
+
+
+def inspect_bag(path: Path | str) -> BagInspection:
+    """Summarise a bag: its findings, then topics, counts, rates, duration, gaps, custom_data.
+
+    Rates are mean receive (log-time) rates per topic [Hz]; the duration is from the first to
+    the last log time [s]. Counts are of the messages that can be read whole.
+
+    Raises:
+        BagError: The path is not a bag, or an MCAP file in it is empty or not MCAP.
     """
     layout = locate_bag(path)
-    truncated = [f for f in layout.mcap_files if not has_footer(f)]
     stats: dict[str, _TopicStats] = {}
     header: list[str] = []
-    if truncated:
-        lost = 0
-        for mcap_file in layout.mcap_files:
-            scan = scan_mcap(mcap_file, on_message=_counter(stats))
-            for channel in scan.channels.values():
-                schema = scan.schemas.get(channel.schema_id)
+    problem = False
+    if layout.mcap_files:
+        check = verify_bag(layout.path, on_message=_counter(stats))
+        for f in check.files:
+            for channel in f.channels.values():
+                schema = f.schemas.get(channel.schema_id)
                 stats.setdefault(
                     channel.topic, _new_stats(channel.topic, schema.name if schema else "?")
                 )
-            lost += scan.bytes_discarded
-        header.append(
-            f"TRUNCATED: {', '.join(f.name for f in truncated)} has no MCAP footer "
-            f"(recorder killed?); {lost} bytes at the end are incomplete. Counts below are the "
-            f"recoverable messages. Repair with: {REPAIR_COMMAND} {layout.path}"
-        )
+        header += _integrity_lines(layout, check)
+        problem = not check.intact
     else:
-        try:
-            with AnyReader([layout.reader_path()], default_typestore=kilted_typestore()) as reader:
-                for conn in reader.connections:
-                    stats.setdefault(conn.topic, _new_stats(conn.topic, conn.msgtype))
-                for conn, log_ns, raw in reader.messages():
-                    stats[conn.topic].add(log_ns, raw)
-        except (AnyReaderError, Rosbag2ReaderError) as exc:
-            msg = f"bag {layout.path} cannot be read as a rosbag2 bag: {exc}"
-            raise BagError(msg) from None
-    return "\n".join(header + _format(layout.path, stats, bag_custom_data(layout)))
+        _read_other(layout, stats)
+    plausibility, refused = _plausibility(layout, damaged=problem)
+    lines = header + _format(layout.path, stats, bag_custom_data(layout)) + plausibility
+    return BagInspection("\n".join(lines), problem or refused)
+
+
+def _integrity_lines(layout: BagLayout, check: BagCheck) -> list[str]:
+    out: list[str] = []
+    truncated = [f for f in check.files if f.truncated is not None]
+    if truncated:
+        out.append(
+            f"TRUNCATED: {', '.join(f.path.name for f in truncated)} has no MCAP footer "
+            f"(recorder killed or disk full?); {sum(f.bytes_discarded for f in truncated)} "
+            "bytes at the end are incomplete. Counts below are the recoverable messages. "
+            f"Repair with: {REPAIR_COMMAND} {layout.path}"
+        )
+    findings = [line for line in check.lines() if not line.startswith("TRUNCATED")]
+    out += findings
+    if check.corrupt:
+        out.append(
+            "Counts below are the messages that can be read whole; "
+            f"{REPAIR_COMMAND} {layout.path} copies them into a new bag"
+        )
+    return out
+
+
+def _read_other(layout: BagLayout, stats: dict[str, _TopicStats]) -> None:
+    """A bag in another storage format (SQLite): read with rosbags."""
+    try:
+        with AnyReader([layout.reader_path()], default_typestore=kilted_typestore()) as reader:
+            for conn in reader.connections:
+                stats.setdefault(conn.topic, _new_stats(conn.topic, conn.msgtype))
+            for conn, log_ns, raw in reader.messages():
+                stats[conn.topic].add(log_ns, raw)
+    except (AnyReaderError, Rosbag2ReaderError) as exc:
+        msg = f"bag {layout.path} cannot be read as a rosbag2 bag: {exc}"
+        raise BagError(msg) from None
+
+
+def _plausibility(layout: BagLayout, *, damaged: bool) -> tuple[list[str], bool]:
+    """The plausibility section, and whether it refuses the bag."""
+    from catheter_models.bag.reader import load_bag
+
+    title = "plausibility (what train, compare and tune check):"
+    if damaged:
+        return [f"{title} not checked: repair the bag first"], False
+    try:
+        report = load_bag(layout.path).plausibility
+    except CatheterError as exc:
+        return [f"{title} not checked: {exc}"], False
+    if not report.findings:
+        return [f"{title} none found"], False
+    return [title] + [f"  {line}" for line in report.lines()], bool(report.refusals)
 
 
 def _new_stats(topic: str, msgtype: str) -> _TopicStats:

@@ -31,12 +31,14 @@ from catheter_models.bag.messages import (
 )
 from catheter_models.bag.metadata import BagLayout, bag_custom_data, locate_bag
 from catheter_models.bag.plausible import (
+    Finding,
     ImplausibleBagError,
     PlausibilityReport,
     StreamSamples,
     check_streams,
 )
-from catheter_models.bag.scan import has_footer, scan_mcap, truncated_bag_error
+from catheter_models.bag.scan import REPAIR_COMMAND, has_footer, scan_mcap, truncated_bag_error
+from catheter_models.bag.verify import verify_bag
 from catheter_models.contract import (
     ANGLE_DESIRED,
     DEFAULT_NAMESPACE,
@@ -417,6 +419,7 @@ def load_bag(
     """
     layout = locate_bag(path)
     _refuse_truncated(layout)
+    integrity = _refuse_damaged(layout)
     wanted = _wanted(topics)
     must_have = _must_have(wanted, topics is None)
     try:
@@ -454,6 +457,7 @@ def load_bag(
         acc.refuse_unstamped()
     # Checked before anything is dropped or sorted, so nothing the loader tidies goes unsaid.
     report = check_streams([acc.samples() for acc in collected.values()], start_ns, ambient_pa)
+    report = PlausibilityReport(integrity + report.findings)
     if report.refusals and require_plausible:
         raise ImplausibleBagError(layout.path, report)
     series: dict[str, StampedSeries] = {}
@@ -477,6 +481,57 @@ def _refuse_truncated(layout: BagLayout) -> None:
     incomplete = [f for f in layout.mcap_files if not has_footer(f)]
     if incomplete:
         raise truncated_bag_error(layout.path, [scan_mcap(f) for f in layout.mcap_files])
+
+
+def _refuse_damaged(layout: BagLayout) -> tuple[Finding, ...]:
+    """Refuse a bag whose MCAP data is damaged; what it cannot verify or that disagrees.
+
+    A chunk that fails its CRC, does not decompress, is not framed or does not match its
+    index is damage: refused (an index-based reader may skip such a chunk without a word).
+    Chunks without a CRC (unverifiable) and a ``metadata.yaml`` that counts other messages
+    than the data holds become findings (a warning; a refusal), named like the plausibility
+    check's.
+    """
+    if not layout.mcap_files:
+        return ()
+    check = verify_bag(layout.path)
+    if check.corrupt or any(f.lost_by_topic() for f in check.files):
+        msg = (
+            f"bag {layout.path} is damaged: {'; '.join(check.lines())}. Its footer is intact, "
+            f"so this is not a cut-off recording; `{REPAIR_COMMAND} {layout.path}` copies the "
+            "readable messages into a new bag and counts what is lost, or restore it from a copy"
+        )
+        raise BagError(msg)
+    findings: list[Finding] = []
+    for f in check.files:
+        chunks = f.unverifiable_chunks
+        if chunks:
+            findings.append(
+                Finding(
+                    topic=f.path.name,
+                    check="unverified chunks",
+                    severity="warn",
+                    count=len(chunks),
+                    total=len(f.chunks),
+                    first_s=None,
+                    detail="chunks carry no CRC (0), so their bytes cannot be verified (size, "
+                    "framing, time spans and counts hold); a flipped bit may pass unseen",
+                )
+            )
+    disagree = check.metadata_disagrees()
+    if disagree:
+        findings.append(
+            Finding(
+                topic="metadata.yaml",
+                check="message counts",
+                severity="refuse",
+                count=len(disagree),
+                total=len(check.recovered_by_topic()),
+                first_s=None,
+                detail="metadata.yaml does not count what the data holds: " + "; ".join(disagree),
+            )
+        )
+    return tuple(findings)
 
 
 def _wanted(topics: Collection[str] | None) -> list[TopicSpec]:
