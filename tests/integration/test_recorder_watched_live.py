@@ -363,3 +363,67 @@ def test_a_disk_without_room_is_refused_before_anything_starts(
     assert str(run_dir / "bag") in done.stderr and "MB needed" in done.stderr
     assert "starting the simulated rig" not in done.stdout
     assert not run_dir.exists()
+
+
+@pytest.mark.fault(
+    "kill -9 of the recorder during a commission recording",
+    safe="excite is stopped and ramps the pressure down; the step fails with the reason and "
+    "the seconds unrecorded from when",
+)
+def test_commission_recording_stops_when_its_recorder_dies(
+    children: Children, tmp_path: Path, fault: FaultRecord, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from catheter_control.commission_rig import CommissionRig, RigChoice, RigError
+
+    for key, value in children.env.items():
+        monkeypatch.setenv(key, value)
+    rig = CommissionRig(RigChoice("sim", "", "/catheter", "env"), tmp_path / "logs")
+    rig.start()
+    probe = Probe(children.domain_id).__enter__()
+    commands = probe.subscribe(FluidPressure, PRESSURE_COMMAND.name, RECORD)
+    killed: list[float] = []
+
+    def kill_when_pressurised() -> None:
+        # Once excite has sent 2 s of commands, the recorder dies (the probe spins here).
+        probe.spin_until(lambda: len(commands) > 2 * CONTROL_RATE_HZ, 60.0)
+        pids = [
+            int(p.parent.name)
+            for p in Path("/proc").glob("[0-9]*/cmdline")
+            if b"catheter_control.recorder_node" in p.read_bytes()
+            and f"{tmp_path}".encode() in p.read_bytes()
+        ]
+        assert pids, "no recorder to kill"
+        killed.append(time.monotonic())
+        os.kill(pids[0], signal.SIGKILL)
+
+    import threading
+
+    killer = threading.Thread(target=kill_when_pressurised)
+    try:
+        killer.start()
+        with pytest.raises(RigError) as stopped:
+            rig.record(["train_zero_f0.8"], tmp_path / "bags" / "train", {}, show_progress=False)
+        killer.join(60.0)
+        probe.spin_for(0.5)
+    finally:
+        rig.stop()
+        probe.__exit__()
+    said = str(stopped.value)
+    print(said)
+    fault.check(
+        "reported",
+        "recorder exited (code -9)" in said and "went unrecorded from" in said,
+        said,
+    )
+    after = gauge_pa([m for m in commands if m.mono_s > killed[0]])
+    peak = int(np.argmax(after))
+    fault.check(
+        "excite ramped the pressure down (no step to zero, never up)",
+        bool(after[-1] <= VENTED_PA)
+        and bool(np.all(np.diff(after[peak:]) <= 1.0))
+        and float(-np.diff(after[peak:]).min(initial=0.0)) <= MAX_SLEW_PA_PER_S / CONTROL_RATE_HZ,
+        f"commands after the kill: from {after.max():.0f} to {after[-1]:.0f} Pa",
+    )
+    ended = [m for m in commands if m.mono_s > killed[0] and gauge_pa([m])[0] <= VENTED_PA]
+    if ended:
+        fault.safe_after(ended[0].mono_s - killed[0])

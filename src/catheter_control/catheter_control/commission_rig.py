@@ -323,7 +323,13 @@ class CommissionRig:
         duration_s = signal_duration_s(signals)
         bar = ProgressBar(duration_s, show_progress)
         heard = RunRecord()  # the recorder's /diagnostics land here
-        watch = RecordingWatch(bag_path, graph, heard, tool="commission")
+        watch = RecordingWatch(
+            bag_path,
+            graph,
+            heard,
+            tool="commission",
+            stopping="stopping excite (it ramps the pressure down) and the step",
+        )
         failed = ""
         start_ns = time.time_ns()
         try:

@@ -75,6 +75,7 @@ class RecordingWatch:
         record: The run's record: the recorder's /diagnostics land there.
         continue_without_bag: Go on with the run when the recording fails (say so, still).
         tool: The tool's name, for what it prints.
+        stopping: What the tool does when the recording fails, as it says it.
     """
 
     bag_path: Path
@@ -82,6 +83,11 @@ class RecordingWatch:
     record: RunRecord
     continue_without_bag: bool = False
     tool: str = "follow_trajectory"
+    stopping: str = (
+        "stopping the run (the compensator ramps down; --continue-without-bag would go on "
+        "without a bag)"
+    )
+    """What the tool does when the recording fails (said with the failure)."""
     failure: RecordingFailure | None = None
     _said: bool = field(default=False, repr=False)
 
@@ -127,8 +133,7 @@ class RecordingWatch:
         then = (
             "going on without a bag (--continue-without-bag)"
             if self.continue_without_bag
-            else "stopping the run (the compensator ramps down; --continue-without-bag would "
-            "go on without a bag)"
+            else self.stopping
         )
         print(
             f"{self.tool}: the recording failed at {wall_text(failure.noticed_ns)}: "
