@@ -271,7 +271,6 @@ def identify(
         The best parameters found and what the search spent.
     """
     budget = budget or Budget()
-    t0 = time.perf_counter()
     lower = np.asarray(bounds.lower, dtype=np.float64)
     upper = np.asarray(bounds.upper, dtype=np.float64)
     free = bounds.free
@@ -284,6 +283,16 @@ def identify(
         full[:, free] = free_values
         return full
 
+    if n_free:
+        # Compile the problem's kernels (numba compiles on first call, or loads its cache)
+        # before the clock starts: on a fresh checkout compiling took a large, machine-
+        # dependent share of a 20 s budget, and a search cut short by it gives another
+        # result on another machine for the same data, seed and budget.
+        middle = expand(((lower + upper) / 2.0)[free][None, :])
+        problem.population_loss(middle)
+        if budget.polish == "least_squares":
+            problem.residuals(middle[0])
+    t0 = time.perf_counter()
     history: list[float] = []
     evaluations = 0
     search_deadline = t0 + budget.wall_time_s * (1.0 - budget.polish_share)
