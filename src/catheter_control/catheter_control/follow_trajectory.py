@@ -97,7 +97,7 @@ START_STOP_S = 30.0
 """What a recorded run records beyond its trajectory, for the free-space check [s]: the
 graph coming up and the recorder hearing every stream (5-15 s on a busy host), the ramp-down
 and the last reports (3.5 s), and the stop."""
-LOG_BYTES = 2_000_000
+LOG_BYTES = 1_000_000
 """Room for the started nodes' logs in the run directory [bytes] (a normal run: 10-50 kB)."""
 
 
