@@ -143,8 +143,12 @@ def test_a_full_disk_stops_the_recorder_says_why_at_once_and_keeps_the_bag(
     not_written = int(str(status_values[f"not_written {angle}"]))
     assert not_written >= 50
     assert int(str(status_values[f"lost {angle}"])) >= not_written
-    # The bag holds its last complete flush: a repair recovers what the recorder says it kept.
-    assert repair_bag(node.bag_path).message_count == outcome.messages > 0
+    # The bag holds its last complete flush: a repair recovers what the recorder says it kept,
+    # and its counts say the same (what was cut off with the half-written chunk is lost).
+    report = repair_bag(node.bag_path)
+    assert report.message_count == outcome.messages > 0
+    assert node.counts[angle] == report.messages_per_topic[angle]
+    assert sum(node.counts.values()) == outcome.messages
 
 
 def test_any_error_in_the_writer_thread_finishes_the_bag_and_says_so(

@@ -145,7 +145,8 @@ class RecorderNode(Node):
         in arrival order among the written ones: a stamp noted late reads as a gap first."""
         self._intake_open = True
         self.not_written: dict[str, int] = {}
-        """Per topic: messages that arrived after the writer failed (never queued)."""
+        """Per topic: messages not in the bag after the writer failed: queued or arrived since,
+        and written after the last complete flush (cut off with it)."""
         self.failure: WriteFailure | None = None
         """Why the writer stopped (None while it records): set once, by the writer thread."""
         self.outcome: CloseOutcome | None = None
@@ -278,7 +279,14 @@ class RecorderNode(Node):
         self._note_dropped()
         writer.set_custom_data("recording_failed", failure.describe())
         self._store_losses()
-        self.outcome = writer.close()
+        outcome = writer.close()
+        for topic, kept in outcome.per_topic.items():
+            # Written after the last complete flush, then cut off with the half-written chunk.
+            cut = self.counts.get(topic, 0) - kept
+            if cut > 0:
+                self.counts[topic] -= cut
+                self.not_written[topic] += cut
+        self.outcome = outcome
         log = self.get_logger()
         if not isinstance(exc, BagWriteError | OSError):
             log.error(f"bag writer thread died: {exc!r}")  # a bug: its type says where

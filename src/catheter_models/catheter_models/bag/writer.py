@@ -29,7 +29,7 @@ import os
 import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import TracebackType
 from typing import IO, Any, Final, Literal, NamedTuple
@@ -178,6 +178,7 @@ class CloseOutcome:
         failure: Why writing stopped (None for a bag closed as planned).
         note: One line for a person: what the file holds and what to do with it (the
             failure is ``failure``'s to say).
+        per_topic: ``messages`` by topic.
     """
 
     finished: bool
@@ -185,6 +186,7 @@ class CloseOutcome:
     until_ns: int | None
     failure: WriteFailure | None
     note: str
+    per_topic: Mapping[str, int] = field(default_factory=dict)
 
 
 @dataclass
@@ -491,7 +493,12 @@ class BagRecorder:
                             "summary inside the .mcap file is complete"
                         )
                     self._outcome = CloseOutcome(
-                        True, summary.message_count, self._extent.last_ns, None, note
+                        True,
+                        summary.message_count,
+                        self._extent.last_ns,
+                        None,
+                        note,
+                        {t.name: t.message_count for t in summary.topics},
                     )
                     return self._outcome
             self._outcome = self._cut_back_locked(self._failure)
@@ -571,7 +578,8 @@ class BagRecorder:
         )
         if problems:
             note += "; " + "; ".join(problems)
-        return CloseOutcome(False, kept.message_count, until_ns, failure, note)
+        per_topic = {t.name: t.message_count for t in kept.topics}
+        return CloseOutcome(False, kept.message_count, until_ns, failure, note, per_topic)
 
     @staticmethod
     def _kilted_schema(msgtype: str) -> tuple[SchemaText, str]:
