@@ -328,6 +328,11 @@ def test_after_its_end_the_plan_s_last_point_is_held_until_the_timeout() -> None
     assert core.state == ControlCore.IDLE and after[-1].pressure_pa == 0.0
     assert np.all(np.diff([o.pressure_pa for o in after]) >= -2e5 * DT - 1e-6)
     assert core.ended is not None and "hold_timeout_s (2 s)" in core.ended[1]
+    # No set-point is in force on the way down: a score of the run must not count the ramp
+    # as the loop missing the plan's last point.
+    down = [o for o in after if o.state != ControlCore.HOLDING]
+    assert len(down) > 1 and all(o.angle_desired_rad is None for o in down)
+    assert all(o.angle_desired_rad is not None for o in after if o.state == ControlCore.HOLDING)
 
 
 def test_no_hold_with_a_zero_timeout_ramps_down_at_the_end() -> None:

@@ -9,6 +9,7 @@ import signal
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -277,7 +278,20 @@ def test_tip_angle_stopping_ramps_the_pressure_down_and_says_why(
         status = statuses(diags, COMPENSATOR)[-1]
         assert status.level == DiagnosticStatus.OK, status.message
         assert diagnostic_values(status)["fault"] == ""
-        assert len(desired) == len(commands)
+
+        # A set-point for every command while a plan is followed; none while ramping down
+        # (the fault's ramp, and each trajectory's end at rest): each command without one is
+        # on the way down.
+        def stamp(m: Any) -> int:
+            return int(m.msg.header.stamp.sec) * 10**9 + int(m.msg.header.stamp.nanosec)
+
+        desired_stamps = {stamp(m) for m in desired}
+        command_stamps = [stamp(m) for m in commands]
+        assert desired_stamps <= set(command_stamps)
+        sent = gauge_pa(commands)
+        unset = [i for i, t in enumerate(command_stamps) if t not in desired_stamps]
+        assert unset, "no ramp-down was seen"
+        assert all(i == 0 or sent[i] <= sent[i - 1] + 1e-6 for i in unset), sent[unset]
 
 
 def test_a_1_khz_loop_follows_like_the_250_hz_one(children: Children, tmp_path: Path) -> None:

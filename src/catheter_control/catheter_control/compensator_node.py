@@ -566,7 +566,11 @@ class CompensatorNode(LifecycleLoopNode):
             self.get_logger().info(released)
         if now_state != was and ControlCore.HOLDING in (was, now_state):
             # Once per hold, not per tick: where it started, or why it ended.
-            if now_state == ControlCore.HOLDING and out is not None:
+            if (
+                now_state == ControlCore.HOLDING
+                and out is not None
+                and out.angle_desired_rad is not None
+            ):
                 self.get_logger().info(
                     f"holding {rad_to_deg(out.angle_desired_rad):.2f} deg after the trajectory's "
                     f"end (released by a new trajectory, ~/stop, a cancel, or after "
@@ -585,7 +589,8 @@ class CompensatorNode(LifecycleLoopNode):
         self._pub_cmd.publish(
             messages.fluid_pressure(out.pressure_pa, stamp_ns, "", self.ambient_pa)
         )
-        self._pub_des.publish(messages.joint_state(out.angle_desired_rad, stamp_ns))
+        if out.angle_desired_rad is not None:  # none while ramping down: no set-point
+            self._pub_des.publish(messages.joint_state(out.angle_desired_rad, stamp_ns))
 
     def _publish_diagnostics(self) -> None:
         """One status a second: the lifecycle state, refusals and, while armed, the loop's timing.

@@ -68,10 +68,15 @@ class StaticInverseCompensator:
 
 @dataclass(frozen=True)
 class TickOutput:
-    """What one tick commands: pressure (gauge [Pa]) and the set-point in force [rad]."""
+    """What one tick commands: pressure (gauge [Pa]) and the set-point in force [rad].
+
+    While ramping down no set-point is in force (None): the plan's last point published then
+    was scored as missed by whatever the ramp let the bend fall, 5 deg on a trajectory that
+    ends bent, and drawn as if the loop had let it go.
+    """
 
     pressure_pa: float
-    angle_desired_rad: float
+    angle_desired_rad: float | None
     state: str
 
 
@@ -312,7 +317,8 @@ class ControlCore:
         if self.state == self.RAMPING_DOWN and command <= 0.0:
             self.state = self.IDLE
             self.plan = None
-        return TickOutput(command, self._last_angle, self.state)
+        following = self.state in (self.FOLLOWING, self.HOLDING)
+        return TickOutput(command, self._last_angle if following else None, self.state)
 
 
 class SensorWatch:
