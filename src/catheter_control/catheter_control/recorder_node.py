@@ -147,8 +147,11 @@ class RecorderNode(Node):
         self.not_written: dict[str, int] = {}
         """Per topic: messages not in the bag after the writer failed: queued or arrived since,
         and written after the last complete flush (cut off with it)."""
+        self._writer_stopped = False
+        """Set by the writer thread at its failure, first: from then on intake counts."""
         self.failure: WriteFailure | None = None
-        """Why the writer stopped (None while it records): set once, by the writer thread."""
+        """Why the writer stopped (None while it records): set once by the writer thread,
+        with ``outcome``, once the bag is closed (a status never says less than both)."""
         self.outcome: CloseOutcome | None = None
         """What the bag file holds after a failure (None before one, or before the close)."""
         self._diag_lock = threading.Lock()
@@ -209,8 +212,8 @@ class RecorderNode(Node):
         def on_message(data: bytes) -> None:
             if not self._intake_open:
                 return  # arrived after the stop: not part of the recording
-            if self.failure is not None:
-                not_written[topic] += 1  # the bag is closed: counted, not queued
+            if self._writer_stopped:
+                not_written[topic] += 1  # the writer failed: counted, not queued
                 return
             arrival = self._arrived
             self._arrived = arrival + 1
@@ -258,8 +261,11 @@ class RecorderNode(Node):
                     return
                 self._stop.wait(_DRAIN_S)
         except BaseException as exc:  # any error: stop, close the bag, say so
-            self._writer_error = exc
-            self._writer_failed(exc)
+            try:
+                self._writer_failed(exc)
+            finally:
+                # After: a status in between would say ERROR without what the bag holds.
+                self._writer_error = exc
 
     def _writer_failed(self, exc: BaseException) -> None:
         """Stop recording: count what is left, close the bag, say why at once (writer thread).
@@ -272,13 +278,13 @@ class RecorderNode(Node):
             failure = exc.failure
         else:
             failure = writer.failure or WriteFailure.of(writer.mcap_path, "write", exc)
-        self.failure = failure  # from here intake counts, never queues
+        self._writer_stopped = True  # from here intake counts, never queues
         while self._queue:
             topic, _data, _now_ns, _arrival = self._queue.popleft()
             self.not_written[topic] += 1
         self._note_dropped()
         writer.set_custom_data("recording_failed", failure.describe())
-        self._store_losses()
+        self._store_losses(failure)
         outcome = writer.close()
         for topic, kept in outcome.per_topic.items():
             # Written after the last complete flush, then cut off with the half-written chunk.
@@ -287,6 +293,7 @@ class RecorderNode(Node):
                 self.counts[topic] -= cut
                 self.not_written[topic] += cut
         self.outcome = outcome
+        self.failure = failure  # with the outcome: the status says both at once
         log = self.get_logger()
         if not isinstance(exc, BagWriteError | OSError):
             log.error(f"bag writer thread died: {exc!r}")  # a bug: its type says where
@@ -361,7 +368,7 @@ class RecorderNode(Node):
             for topic, g in self.gaps.items()
         }
 
-    def _store_losses(self) -> None:
+    def _store_losses(self, failure: WriteFailure | None = None) -> None:
         summary = self.loss_summary()
         self.writer.set_custom_data(
             "samples_lost", json.dumps({t: s["lost"] for t, s in summary.items()})
@@ -370,7 +377,7 @@ class RecorderNode(Node):
         self.writer.set_custom_data(
             "dropped_by_recorder", json.dumps({t: n for t, n in self.dropped.items() if n})
         )
-        if self.failure is not None:
+        if failure is not None or self.failure is not None:
             self.writer.set_custom_data(
                 "not_written", json.dumps({t: n for t, n in self.not_written.items() if n})
             )

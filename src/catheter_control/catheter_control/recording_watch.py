@@ -98,6 +98,15 @@ class RecordingWatch:
             if self.failure is None:
                 return ""
             self._say()
+        elif self.failure.recorded_until_ns is None or self.failure.bag_file == "unknown":
+            # A later report may say what the first did not (until when, the file's state).
+            later = self._look()
+            if later is not None:
+                self.failure.recorded_until_ns = (
+                    self.failure.recorded_until_ns or later.recorded_until_ns
+                )
+                if self.failure.bag_file == "unknown":
+                    self.failure.bag_file = later.bag_file
         if self.continue_without_bag:
             return ""
         return f"the recording failed: {self.failure.reason}"

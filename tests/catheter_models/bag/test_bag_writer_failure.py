@@ -207,3 +207,32 @@ def test_free_space_check_names_the_figures_and_the_path(tmp_path: Path) -> None
     assert check_free_space(need, free_bytes=need.need_bytes) == need.need_bytes
     # Asked of the OS for a directory not made yet: its nearest existing parent's disk.
     assert check_free_space(need_for(tmp_path / "a" / "b", 1.0)) > 0
+
+
+def test_a_refused_metadata_rewrite_cuts_back_to_what_metadata_yaml_counts(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import catheter_models.bag.writer as writer_module
+
+    real = writer_module.write_metadata
+    refuse = [False]
+
+    def refusing_metadata(*args: Any, **kwargs: Any) -> None:
+        if refuse[0]:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        real(*args, **kwargs)
+
+    monkeypatch.setattr(writer_module, "write_metadata", refusing_metadata)
+    rec = BagRecorder(tmp_path / "bag", flush_period_s=0.5)
+    rec.add_topic(CMD, PRESSURE_COMMAND.msgtype)
+    for i in range(200):  # the flush at 0.5 s: 126 messages
+        _write(rec, i)
+    refuse[0] = True
+    with pytest.raises(BagWriteError):
+        for i in range(200, 300):  # the data of the flush at 1.0 s goes out, its metadata not
+            _write(rec, i)
+    outcome = rec.close()
+    # metadata.yaml still says 126: the file is cut back to the same flush, and they agree.
+    assert _meta_count(rec.path) == outcome.messages == 126
+    refuse[0] = False  # room again for the repaired copy
+    assert repair_bag(rec.path).message_count == 126

@@ -610,16 +610,17 @@ class BagRecorder:
                 os.fsync(self._stream.fileno())
         except OSError as exc:
             raise self._fail("flush", exc) from exc
-        self._good_offset = self._stream.tell()
-        self._good_summary = self._summary()
+        offset, summary = self._stream.tell(), self._summary()
         self._flushed.log_ns = self._extent.last_ns
         self._flushed.wall_s = self._clock()
         # Only after the data is out: the counts in metadata.yaml never exceed the file's.
         try:
-            write_metadata(self.path, self._good_summary, fsync=self._fsync)
+            write_metadata(self.path, summary, fsync=self._fsync)
         except OSError as exc:
-            # The data is whole up to here; a disk that refuses 5 kB refuses the next chunk.
+            # metadata.yaml still counts the flush before: a cut back goes there too, so the
+            # two agree (a disk that refuses 5 kB refuses the next chunk anyway).
             raise self._fail("flush", exc) from exc
+        self._good_offset, self._good_summary = offset, summary
 
     def _summary(self) -> BagSummary:
         return BagSummary(
