@@ -43,6 +43,7 @@ from mcap.records import (
     Schema,
     Statistics,
 )
+from mcap.stream_reader import get_chunk_data_stream
 
 from catheter_models.bag.metadata import locate_bag
 from catheter_models.bag.scan import MCAP_MAGIC, has_footer
@@ -495,24 +496,17 @@ class _ChunkDamageError(Exception):
 
 
 def _decompress(chunk: Chunk) -> bytes:
-    if chunk.compression == "":
-        return chunk.data
+    """The chunk's records, decompressed by ``mcap``'s own zstd or lz4 support."""
+    if chunk.compression not in ("", "zstd", "lz4"):
+        msg = f"its compression {chunk.compression!r} is unknown (MCAP knows zstd, lz4 and none)"
+        raise _ChunkDamageError(msg)
     try:
-        if chunk.compression == "zstd":
-            import zstandard
-
-            return zstandard.ZstdDecompressor().decompress(
-                chunk.data, max_output_size=chunk.uncompressed_size
-            )
-        if chunk.compression == "lz4":
-            import lz4.frame
-
-            return bytes(lz4.frame.decompress(chunk.data))
+        stream, length = get_chunk_data_stream(chunk, validate_crc=False)
+        return stream.read(length)
     except Exception as exc:  # each decoder raises its own types
-        msg = f"its {chunk.compression} data cannot be decompressed ({type(exc).__name__}: {exc})"
+        what = chunk.compression or "uncompressed"
+        msg = f"its {what} data cannot be decompressed ({type(exc).__name__}: {exc})"
         raise _ChunkDamageError(msg) from None
-    msg = f"its compression {chunk.compression!r} is unknown (MCAP knows zstd, lz4 and none)"
-    raise _ChunkDamageError(msg)
 
 
 @dataclass
