@@ -180,3 +180,41 @@ def test_the_cli_writes_gains_a_node_can_load_and_a_report(tmp_path: Path) -> No
     page = (tmp_path / "r" / "index.html").read_text()
     assert "steps.png" in page and "loop.png" in page
     assert (tmp_path / "r" / "loop.png").stat().st_size > 10_000
+
+
+def test_a_bend_that_arrives_late_is_designed_for() -> None:
+    """A laser driver stamps the time the bend was true and sends it 12 ms later: the steps
+    (fitted on stamps) cannot show it, the recording's measurement age does, and a design that
+    leaves it out breaks its promise on the loop that actually runs."""
+    import dataclasses
+
+    plant = LinearPlant(tau_s=0.01, delay_s=0.004)
+    on_time = plant.record()
+    late = dataclasses.replace(on_time, measurement_age_s=0.012)
+    model_on_time, model_late = identify([on_time]), identify([late])
+    assert model_on_time.measurement_age_s == 0.0
+    assert model_late.measurement_age_s == pytest.approx(0.012)
+    assert model_late.delay_s == pytest.approx(model_on_time.delay_s)  # the steps agree
+    assert "measured 12.0 ms before it arrives" in model_late.describe()
+    naive, _ = design(model_on_time)
+    gains, found = design(model_late)
+    assert found.max_sensitivity <= 1.6 + 1e-9
+    assert margins(model_late, naive).max_sensitivity > 1.6, "the age made no difference"
+    assert found.crossover_hz < margins(model_on_time, naive).crossover_hz
+    # On the plant with the bend fed back 3 samples late: a step settles.
+    wide = FeedbackGains(**{**gains.__dict__, "max_correction_pa": 3e5})
+    loop = ClosedLoop(
+        None, wide, rate_hz=RATE_HZ, min_pressure_pa=0.0, max_pressure_pa=3e5, max_slew_pa_per_s=1e9
+    )
+    loop.reset()
+    plant.reset()
+    target = math.radians(10.0)
+    in_flight = [0.0, 0.0, 0.0]
+    out = []
+    for _ in range(round(4 * RATE_HZ)):
+        y = plant.step(loop.step(target, in_flight[0]))
+        in_flight = [*in_flight[1:], y]
+        out.append(y)
+    bend = np.degrees(np.asarray(out))
+    assert abs(bend[-round(RATE_HZ) :] - 10.0).max() < 0.05
+    assert bend.max() < 10.0 * 1.5

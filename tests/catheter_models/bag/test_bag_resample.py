@@ -47,6 +47,7 @@ def _bag(
     sensor_ns: IntArray,
     *,
     desired_ns: IntArray | None = None,
+    angle_age_ns: int = 0,
 ) -> Path:
     """A bag with each stream on its own stamps (integer ns); the sensors read ``1e6 * t``."""
     names = {s.name: f"/catheter/{s.name}" for s in (PRESSURE_COMMAND, PRESSURE_MEASURED)}
@@ -67,7 +68,9 @@ def _bag(
             log = max(stamp, EPOCH_NS) if stamp != first else EPOCH_NS
             cdr = fluid_pressure_cdr(stamp, 1e6 * t_s, ambient_pa=AMBIENT_PRESSURE_PA)
             rec.write(names["pressure/measured"], cdr, log, log)
-            rec.write("/catheter/tip/angle", joint_state_cdr(stamp, 1e-3 * t_s), log, log)
+            angle_log = log + angle_age_ns  # a driver that back-dates its samples
+            angle = joint_state_cdr(stamp, 1e-3 * t_s)
+            rec.write("/catheter/tip/angle", angle, angle_log, angle_log)
         if desired_ns is not None:
             for i, stamp in enumerate(desired_ns.tolist()):
                 log = max(stamp, EPOCH_NS)
@@ -254,3 +257,20 @@ def test_a_set_point_applies_from_its_stamp_within_the_tolerance(
     # value applies from the next grid point after its stamp, 2.4 ms after it.
     lead_ms = 1e3 * (data.series["angle/desired"].t_s[taken] - aligned.t_s)
     np.testing.assert_allclose(lead_ms, 0.5 if applies_early else -2.4, atol=1e-6)
+
+
+def test_how_late_a_back_dated_bend_arrives_is_kept(tmp_path: Path) -> None:
+    """The laser driver stamps when the bend was true; the recorder logs when it came: the
+    difference is the loop's measurement delay, which ``tune`` designs for."""
+    n = 3000
+    data = _loaded(
+        _bag(
+            tmp_path / "b",
+            _stamps(n, COMMAND_PHASE_NS),
+            _ramp(n),
+            _stamps(n, SENSOR_PHASE_NS),
+            angle_age_ns=11_600_000,
+        )
+    )
+    assert data.tip_angle.arrival_age_s == pytest.approx(0.0116)
+    assert data.pressure_measured.arrival_age_s == pytest.approx(0.0, abs=1e-6)

@@ -101,6 +101,11 @@ class StampedSeries:
         values: Values in SI (read-only); ``unit`` says which.
         unit: ``"Pa (gauge)"``, ``"rad"`` or ``"m"``.
         message_count: Messages on the topic, including the dropped ones.
+        arrival_age_s: Median of log time minus header stamp [s], at least 0: how old a
+            sample was when the recorder had it. A driver that stamps the time the value was
+            true (a laser's sample, back-dated past its transport) shows its latency here,
+            which the stamps alone hide; a controller on the same host gets the sample as
+            late. 0 when the clocks differ (stamps after arrival).
     """
 
     name: str
@@ -110,6 +115,7 @@ class StampedSeries:
     values: FloatArray
     unit: str
     message_count: int
+    arrival_age_s: float = 0.0
 
     def __len__(self) -> int:
         """Number of kept samples."""
@@ -672,8 +678,18 @@ class _Accumulator:
             values=_frozen(values[keep][order]),
             unit=_UNITS[self.name],
             message_count=len(self.stamps_ns),
+            arrival_age_s=_arrival_age_s(
+                np.asarray(self.log_ns, dtype=np.int64)[keep], stamps[keep]
+            ),
         )
         return series, int(np.count_nonzero(~finite)), int(np.count_nonzero(finite & ~in_range))
+
+
+def _arrival_age_s(log_ns: npt.NDArray[np.int64], stamps_ns: npt.NDArray[np.int64]) -> float:
+    """Median (log time - stamp) [s], at least 0 (see ``StampedSeries.arrival_age_s``)."""
+    if log_ns.size == 0:
+        return 0.0
+    return max(0.0, float(np.median(log_ns - stamps_ns)) / NS_PER_S)
 
 
 def _decode(name: str, msg: Any, topic: str, ambient_pa: float) -> tuple[int, float, bool]:

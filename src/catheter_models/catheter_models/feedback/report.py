@@ -52,7 +52,7 @@ def closed_loop_step(
         num = num * wn**2
         den = np.polymul(den, [1.0, 2.0 * model.resonance_damping * wn, wn**2])
     a, b, c, d, _ = signal.cont2discrete(signal.tf2ss(num, den), dt, method="zoh")
-    delay = round(model.delay_s / dt)
+    delay = round((model.delay_s + model.measurement_age_s) / dt)  # the loop sees both
     n = round(duration_s / dt)
     x = np.zeros((a.shape[0], 1))
     queue = [0.0] * (delay + 1)

@@ -70,6 +70,9 @@ class Recording:
         angle_rad: Measured bend angle [rad].
         source: Bag path, or ``simulated:<preset>``.
         sha256: Hash of the bag's files (recorded in a model's manifest), or "" if simulated.
+        measurement_age_s: How old a bend sample was when it arrived (the bag's
+            ``tip/angle`` arrival age), 0 if unknown or simulated. The grid is on the stamps,
+            the time the bend was true; a feedback loop sees it this much later (``tune``).
     """
 
     name: str
@@ -78,6 +81,7 @@ class Recording:
     angle_rad: FloatArray
     source: str = ""
     sha256: str = ""
+    measurement_age_s: float = 0.0
 
     def __post_init__(self) -> None:
         p = np.ascontiguousarray(self.pressure_pa, dtype=np.float64)

@@ -100,6 +100,7 @@ def recording_from_bag(
         angle_rad=np.asarray(aligned.angle_rad),
         source=str(path),
         sha256=bag_sha256(path),
+        measurement_age_s=data.tip_angle.arrival_age_s,
     )
 
 
