@@ -33,7 +33,7 @@ import math
 import time
 from collections import OrderedDict
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any, ClassVar, Final, Self
+from typing import TYPE_CHECKING, Any, ClassVar, Final
 
 import numpy as np
 import numpy.typing as npt
@@ -58,6 +58,9 @@ from catheter_models.models.base import (
 from catheter_models.models.drdpi import DRDPI
 from catheter_models.models.evaluate import pooled_rmse
 from catheter_models.units import deg_to_rad, pa_to_bar, rad_to_deg
+
+if TYPE_CHECKING:
+    from typing import Self  # 3.11+; annotations only, so 3.10 imports the module
 
 GREYBOX_FILE = "greybox.json"
 GREYBOX_FORMAT = 2

@@ -24,7 +24,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path, PurePath
-from typing import Any, ClassVar, Literal, Protocol, Self
+from typing import TYPE_CHECKING, Any, ClassVar, Literal, Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -32,6 +32,9 @@ import numpy.typing as npt
 from catheter_models.contract import ANGLE_DESIRED, PRESSURE_COMMAND, SENSOR_RATE_HZ, TIP_ANGLE
 from catheter_models.errors import CatheterError, ParameterError, SignalError
 from catheter_models.model_dir import Manifest, read_model_dir, write_model_dir
+
+if TYPE_CHECKING:
+    from typing import Self  # 3.11+; annotations only, so 3.10 imports the module
 
 FloatArray = npt.NDArray[np.float64]
 Direction = Literal["forward", "inverse"]

@@ -21,7 +21,7 @@ import math
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar, Final, Self
+from typing import TYPE_CHECKING, Any, ClassVar, Final
 
 import numpy as np
 import numpy.typing as npt
@@ -51,6 +51,9 @@ from catheter_models.models.identify import (
 )
 from catheter_models.models.params import ParameterSet, ParamsFile
 from catheter_models.units import bar_to_pa, deg_to_rad, pa_to_bar, rad_to_deg
+
+if TYPE_CHECKING:
+    from typing import Self  # 3.11+; annotations only, so 3.10 imports the module
 
 GPI_UNITS: Final[Mapping[str, str]] = {
     "c0": "g",

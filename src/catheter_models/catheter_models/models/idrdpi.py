@@ -51,7 +51,7 @@ import re
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar, Final, Literal, Self, get_args
+from typing import TYPE_CHECKING, Any, ClassVar, Final, Literal, get_args
 
 import numpy as np
 import numpy.typing as npt
@@ -88,6 +88,9 @@ from catheter_models.models.drdpi import (
 from catheter_models.models.gpi import GPI, GPIParams
 from catheter_models.models.identify import Budget, ParameterBounds
 from catheter_models.units import bar_to_pa, deg_to_rad, pa_to_bar, rad_to_deg
+
+if TYPE_CHECKING:
+    from typing import Self  # 3.11+; annotations only, so 3.10 imports the module
 
 Method = Literal["analytic", "gpi", "direct"]
 Structure = Literal["inverse", "drdpi"]

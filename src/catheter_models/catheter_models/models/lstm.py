@@ -41,7 +41,7 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any, ClassVar, Final, Self
+from typing import TYPE_CHECKING, Any, ClassVar, Final
 
 import numpy as np
 import numpy.typing as npt
@@ -75,6 +75,9 @@ from catheter_models.models.lstm_graph import (
     ValidationSplit,
 )
 from catheter_models.onnx_runtime import ort
+
+if TYPE_CHECKING:
+    from typing import Self  # 3.11+; annotations only, so 3.10 imports the module
 
 _PREDICT_BATCH_WINDOWS: Final = 4096
 """Windows per ONNX call in windowed :meth:`predict`: bounds memory to about 1 MB a batch."""

@@ -13,13 +13,16 @@ import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
-from typing import Any, ClassVar, Generic, Self, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, Generic, TypeVar
 
 import numpy as np
 import numpy.typing as npt
 
 from catheter_models.errors import ParameterError
 from catheter_models.models.base import ModelError
+
+if TYPE_CHECKING:
+    from typing import Self  # 3.11+; annotations only, so 3.10 imports the module
 
 FloatArray = npt.NDArray[np.float64]
 

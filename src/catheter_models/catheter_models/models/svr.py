@@ -51,7 +51,7 @@ import math
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
-from typing import Any, ClassVar, Final, Self
+from typing import TYPE_CHECKING, Any, ClassVar, Final
 
 import numpy as np
 import numpy.typing as npt
@@ -72,6 +72,9 @@ from catheter_models.models.base import (
     check_finite_step,
 )
 from catheter_models.units import rad_to_deg
+
+if TYPE_CHECKING:
+    from typing import Self  # 3.11+; annotations only, so 3.10 imports the module
 
 KIND: Final = "svr"
 WEIGHTS_FILE: Final = "svr.npz"
