@@ -6,7 +6,12 @@ import numpy as np
 import pytest
 
 from catheter_models.errors import ParameterError
-from catheter_models.model_dir import ModelDirError, read_model_dir, write_model_dir
+from catheter_models.model_dir import (
+    ModelDirError,
+    read_manifest,
+    read_model_dir,
+    write_model_dir,
+)
 from catheter_models.plant import Plant, PlantConfig
 from catheter_models.signals import training_set
 from catheter_models.static_map import StaticMap
@@ -35,6 +40,21 @@ def test_tampered_weight_file_is_refused(tmp_path) -> None:
     (tmp_path / "m" / "w.json").write_bytes(b"[1,3]")
     with pytest.raises(ModelDirError, match=r"'w.json' fails its sha256 check"):
         read_model_dir(tmp_path / "m")
+
+
+def test_the_manifest_alone_is_read_sealed_and_the_weights_only_with_the_model(tmp_path) -> None:
+    """``load_model`` reads the kind from the manifest, then the kind's load reads and checks
+    each weight file once (it read and hashed every file twice)."""
+    write_model_dir(tmp_path / "m", "demo", {}, {}, {"w.json": b"[1,2]"})
+    (tmp_path / "m" / "w.json").write_bytes(b"[1,3]")
+    assert read_manifest(tmp_path / "m").kind == "demo"  # the weights are not its business
+    with pytest.raises(ModelDirError, match="expected 'other'"):
+        read_manifest(tmp_path / "m", expected_kind="other")
+    manifest = json.loads((tmp_path / "m" / "manifest.json").read_text())
+    manifest["kind"] = "edited"
+    (tmp_path / "m" / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(ModelDirError, match="sha256"):
+        read_manifest(tmp_path / "m")  # the seal is checked all the same
 
 
 @pytest.mark.parametrize(

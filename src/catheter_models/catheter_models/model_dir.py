@@ -150,14 +150,14 @@ def _check_seal(manifest_path: Path, raw: Mapping[str, Any]) -> None:
         )
 
 
-def read_model_dir(
-    path: Path, expected_kind: str | None = None
-) -> tuple[Manifest, dict[str, bytes]]:
-    """Read and verify a model directory; returns the manifest and the verified file bytes.
+def read_manifest(path: Path, expected_kind: str | None = None) -> Manifest:
+    """A model directory's manifest, its seal checked; the weight files are not read.
+
+    For what only the manifest answers (the kind, to pick the class that loads the whole
+    directory): :func:`read_model_dir` reads and hash-checks the files once, then.
 
     Raises:
-        ModelDirError: no manifest, malformed manifest, wrong kind, a file missing, or a
-            sha256 mismatch (the message names the file).
+        ModelDirError: no manifest, a malformed or unsealed one, or the wrong kind.
     """
     path = Path(path)
     manifest_path = path / MANIFEST
@@ -191,6 +191,20 @@ def read_model_dir(
         )
     if expected_kind is not None and manifest.kind != expected_kind:
         raise ModelDirError(f"{path} holds a {manifest.kind!r} model, expected {expected_kind!r}")
+    return manifest
+
+
+def read_model_dir(
+    path: Path, expected_kind: str | None = None
+) -> tuple[Manifest, dict[str, bytes]]:
+    """Read and verify a model directory; returns the manifest and the verified file bytes.
+
+    Raises:
+        ModelDirError: no manifest, malformed manifest, wrong kind, a file missing, or a
+            sha256 mismatch (the message names the file).
+    """
+    path = Path(path)
+    manifest = read_manifest(path, expected_kind)
     payload = {}
     for name, expected in manifest.files.items():
         file_path = path / name

@@ -19,7 +19,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Final
 
-from catheter_models.model_dir import read_model_dir
+from catheter_models.model_dir import read_manifest
 from catheter_models.models.base import (
     InsufficientDataError,
     Model,
@@ -97,8 +97,8 @@ def model_class(kind: str) -> type[Model]:
 
 def load_model(path: Path | str) -> Model:
     """Load any model directory (kind read from its manifest, every file hash-checked)."""
-    manifest, _ = read_model_dir(Path(path))
-    return model_class(manifest.kind).load(path)
+    # The manifest alone names the kind; the kind's own load reads and checks every file once.
+    return model_class(read_manifest(Path(path)).kind).load(path)
 
 
 __all__ = [
