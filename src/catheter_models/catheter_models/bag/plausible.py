@@ -100,6 +100,8 @@ class Finding:
         total: Samples on the topic.
         first_s: Log time of the first offending sample [s since the bag's start].
         detail: What was seen, for a person.
+        unit: What ``count`` and ``total`` count (``samples``; ``chunks`` or ``topics`` for
+            what the loader finds about the file itself).
     """
 
     topic: str
@@ -109,12 +111,13 @@ class Finding:
     total: int
     first_s: float | None
     detail: str
+    unit: str = "samples"
 
     def describe(self) -> str:
         """One line: topic, check, counts, first offending time, what was seen."""
         where = "" if self.first_s is None else f", first at {self.first_s:.3f} s"
         return (
-            f"{self.topic}: {self.check}: {self.count} of {self.total} samples{where}; "
+            f"{self.topic}: {self.check}: {self.count} of {self.total} {self.unit}{where}; "
             f"{self.detail}"
         )
 
@@ -128,6 +131,7 @@ class Finding:
             "total": self.total,
             "first_s": self.first_s,
             "detail": self.detail,
+            "unit": self.unit,
         }
 
 

@@ -520,6 +520,7 @@ def _refuse_damaged(layout: BagLayout) -> tuple[Finding, ...]:
                     count=len(chunks),
                     total=len(f.chunks),
                     first_s=None,
+                    unit="chunks",
                     detail="chunks carry no CRC (0), so their bytes cannot be verified (size, "
                     "framing, time spans and counts hold); a flipped bit may pass unseen",
                 )
@@ -534,6 +535,7 @@ def _refuse_damaged(layout: BagLayout) -> tuple[Finding, ...]:
                 count=len(disagree),
                 total=len(check.recovered_by_topic()),
                 first_s=None,
+                unit="topics",
                 detail="metadata.yaml does not count what the data holds: " + "; ".join(disagree),
             )
         )
