@@ -190,7 +190,9 @@ class McapCheck:
         return lost
 
     def lines(self, start_ns: int | None = None) -> list[str]:
-        """What a person needs to know about this file, one finding a line (empty: whole).
+        """Truncation, corruption and unverifiable chunks of this file, one a line.
+
+        What is lost is said over the whole bag (:meth:`BagCheck.loss_summary`).
 
         Args:
             start_ns: Times are given in seconds from here (default: the first recovered
@@ -217,13 +219,6 @@ class McapCheck:
                 f"chunks carry no CRC (0), so their bytes cannot be verified "
                 f"({_span(first.start_ns, last.end_ns, origin)}); their size, record framing, "
                 "time spans and counts were checked and hold"
-            )
-        lost = self.lost_by_topic()
-        if lost and self.statistics is not None:
-            said = ", ".join(f"{t}: {n}" for t, n in sorted(lost.items()))
-            out.append(
-                f"LOST: {self.path.name}: {sum(lost.values())} messages its summary counts are "
-                f"not readable ({said})"
             )
         return out
 
@@ -595,11 +590,19 @@ class BagCheck:
         if self.metadata_counts is None:
             return []
         recovered = self.recovered_by_topic()
+        # Messages the files themselves account as lost (a corrupt chunk's index, the
+        # summary's statistics) explain as much of a difference; those are said as lost.
+        accounted: dict[str, int] = {}
+        for f in self.files:
+            for topic, n in f.lost_by_topic().items():
+                accounted[topic] = accounted.get(topic, 0) + n
         out = []
         for topic in sorted(set(self.metadata_counts) | set(recovered)):
             claimed = self.metadata_counts.get(topic, 0)
             held = recovered.get(topic, 0)
-            if claimed > held or (claimed != held and not self.truncated):
+            if claimed == held + accounted.get(topic, 0):
+                continue
+            if claimed > held or not self.truncated:
                 out.append(f"{topic}: metadata.yaml says {claimed}, the data holds {held}")
         return out
 
