@@ -6,8 +6,10 @@ module:
 * ``writer``   - ``BagRecorder`` (streaming recorder core), ``write_bag_from_arrays``
 * ``reader``   - ``load_bag`` -> ``BagData`` -> ``AlignedSeries``
 * ``playback`` - ``Player``: a bag's messages back onto the graph at their recorded pace
-* ``repair``   - ``repair_bag`` for bags whose recorder was killed
-* ``info``     - ``bag_info`` text summary
+* ``repair``   - ``repair_bag`` for truncated or damaged bags, saying what was lost
+* ``info``     - ``bag_info`` text summary (``inspect_bag``: with whether it found a problem)
+* ``plausible``- the plausibility check of a bag's data (values, stamps, non-finite share)
+* ``verify``   - reading an MCAP file past damage: truncated, corrupt, unverifiable, lost
 * ``metadata`` - ``metadata.yaml``, QoS profiles, bag layout on disk
 * ``messages`` - contract messages <-> SI values
 * ``scan``     - front-to-back MCAP reading up to a truncation
