@@ -266,7 +266,7 @@ def _check_values(stream: StreamSamples, start_ns: int, ambient_pa: float) -> li
         refuse = share > NON_FINITE_REFUSE_SHARE
         detail = (
             f"{share:.1%} of the samples are NaN or infinite (more than "
-            f"{NON_FINITE_REFUSE_SHARE:.0%}: the stream would be mostly interpolated)"
+            f"{NON_FINITE_REFUSE_SHARE:.0%}: too much of the stream would be interpolated)"
             if refuse
             else f"{share:.1%} NaN or infinite, dropped; the resampling interpolates across them"
         )
