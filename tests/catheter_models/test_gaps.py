@@ -91,3 +91,41 @@ def test_missing_samples_rule() -> None:
     assert missing_samples(0.0081, 0.004, pause_s=None) == 1
     assert missing_samples(0.092, 0.004, pause_s=None) == 22
     assert missing_samples(PAUSE_S + 0.1, 0.004, pause_s=PAUSE_S) == 0
+
+
+def test_the_gaps_can_be_read_while_another_thread_adds_stamps() -> None:
+    """The recorder adds stamps from its writer thread while its /diagnostics timer reads the
+    longest gap: that read once raised "deque mutated during iteration" and killed it."""
+    import sys
+    import threading
+
+    from catheter_models.gaps import StreamGaps
+
+    gaps = StreamGaps(pauses=False, keep=100)
+    stop = threading.Event()
+    errors: list[BaseException] = []
+
+    def writer() -> None:
+        stamp, n = 0, 0
+        while not stop.is_set():
+            n += 1
+            stamp += 12_000_000 if n % 3 == 0 else 4_000_000  # two samples lost every third
+            gaps.add(stamp)
+
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)  # switch threads as often as the interpreter can
+    thread = threading.Thread(target=writer)
+    thread.start()
+    try:
+        for _ in range(20_000):
+            try:
+                gaps.longest_s  # noqa: B018 - the read is the test
+            except RuntimeError as exc:
+                errors.append(exc)
+                break
+    finally:
+        stop.set()
+        thread.join()
+        sys.setswitchinterval(interval)
+    assert not errors, errors
+    assert gaps.gap_count > 100 and gaps.longest_s > 0.0

@@ -15,6 +15,7 @@ not a loss: a lost stretch longer than that in a command stream is not counted.
 from __future__ import annotations
 
 import struct
+import threading
 from collections import deque
 from dataclasses import dataclass
 
@@ -103,6 +104,10 @@ class StreamGaps:
         pauses: whether the stream stops between runs (see the module docstring).
         pause_s: the longest silence read as a loss in such a stream [s].
         keep: gaps kept for the report (the counts cover all of them).
+
+    Thread-safe: the recorder adds stamps from its writer thread while its /diagnostics
+    timer reads the gaps; a read that iterated the deque while a stamp was added raised
+    "deque mutated during iteration" and killed the recorder mid-run (exit 1).
     """
 
     def __init__(self, *, pauses: bool, pause_s: float = PAUSE_S, keep: int = 100) -> None:
@@ -120,9 +125,14 @@ class StreamGaps:
         self._intervals: deque[int] = deque(maxlen=_RELEARN)
         self._pending: list[tuple[int, int]] = []
         self._last_ns: int | None = None
+        self._lock = threading.Lock()
 
     def add(self, stamp_ns: int) -> None:
         """One message's header stamp [ns]."""
+        with self._lock:
+            self._add(stamp_ns)
+
+    def _add(self, stamp_ns: int) -> None:
         self.samples += 1
         last, self._last_ns = self._last_ns, stamp_ns
         if last is None:
@@ -175,7 +185,8 @@ class StreamGaps:
     @property
     def longest_s(self) -> float:
         """The longest kept gap [s] (0 if none)."""
-        return max((g.duration_s for g in self.gaps), default=0.0)
+        with self._lock:
+            return max((g.duration_s for g in self.gaps), default=0.0)
 
 
 def find_gaps(
