@@ -91,9 +91,9 @@ class LoopModel:
     """How late the bend reaches the controller after its stamp (the recordings' largest
     ``measurement_age_s``). The steps are fitted on stamps, the time the bend was true, so
     ``delay_s`` cannot contain it; the loop runs with it all the same. On the emulated rig
-    the laser driver back-dates its samples by 11.6 ms (median): a design without it put the
-    crossover at 14 Hz with 63 deg of phase margin, 12 ms of delay to spare, and the loop
-    rang at +-4 deg on the stiff parts of the thesis trajectories."""
+    it was 11.6 ms in one commissioning's recordings (1.7 to 4.6 ms in others): a design
+    without it put the crossover at 14 Hz with 63 deg of phase margin, 12 ms of delay to
+    spare, and the loop rang at +-1 to 4 deg on the stiff parts of the thesis trajectories."""
 
     def response(
         self, w_rad_s: FloatArray, extra_delay_s: float = 0.0
