@@ -87,9 +87,11 @@ def test_deactivating_the_compensator_mid_run_ramps_the_pressure_down(
         # Wait for the hold, not the ramp: on a busy machine 1 bar was reached mid-ramp and
         # the command then still rose ~250 Pa a tick while the request travelled.
         assert probe.spin_until(
-            lambda: len(commands) > 25
-            and gauge_pa(commands[-25:]).min() > 1.0e5
-            and np.ptp(gauge_pa(commands[-25:])) < 250.0,
+            lambda: (
+                len(commands) > 25
+                and gauge_pa(commands[-25:]).min() > 1.0e5
+                and np.ptp(gauge_pa(commands[-25:])) < 250.0
+            ),
             20.0,
         ), f"{len(commands)} commands, last {gauge_pa(commands[-25:])}"
 
