@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -56,6 +57,19 @@ def fault(request: pytest.FixtureRequest) -> Iterator[FaultRecord]:
         report = getattr(request.node, "report_call", None)
         record.outcome = "not run" if report is None else report.outcome
         _FAULTS.append(record)
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Children must start with SIGINT at its default, whoever started the suite.
+
+    A suite started in the background by a non-interactive shell (``make test &``, nohup, some
+    CI runners) inherits SIGINT ignored; an ignored signal stays ignored across exec, and
+    Python keeps it so: the tests that stop a tool with SIGINT, as Ctrl-C does, saw it run on
+    (two failures in a clean-clone run started that way). A handled signal is reset to its
+    default in every child at exec, so handling it here is enough.
+    """
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:

@@ -191,7 +191,12 @@ def test_follow_trajectory_end_to_end(children: Children, tmp_path: Path) -> Non
     assert 0.90 * (cmd_span_s * RATE_HZ + 1) <= cmd.size <= cmd_span_s * RATE_HZ + 1
     # A skipped tick is a command that never existed, and the bag says how many.
     assert lost[CMD] == round(cmd_span_s * RATE_HZ) + 1 - cmd.size, (lost, cmd.size)
-    assert counts[qualify(ANGLE_DESIRED)] == cmd.size  # published together at each tick
+    # Published together at each tick while the plan runs; none during the ramp down at its
+    # end (no set-point is in force then), so the commands without one are that ramp.
+    desired = np.array([_stamp_ns(m) for m in rb_msgs[qualify(ANGLE_DESIRED)]], dtype=np.int64)
+    assert np.isin(desired, cmd).all()
+    ramp = cmd[~np.isin(cmd, desired)]
+    assert ramp.size < cmd.size // 10 and np.all(ramp > desired.max()), (ramp.size, cmd.size)
 
     # FluidPressure is absolute: ambient plus a gauge pressure in [0, 3 bar] (+ sensor noise).
     for msgs in (rb_msgs, mc_msgs):
