@@ -10,14 +10,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import subprocess
-import uuid
 from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
+from tmpfs import mounted_tmpfs
 
 from catheter_control import follow_trajectory
 from catheter_control.recording_watch import RecordingWatch
@@ -122,22 +120,8 @@ def test_report_and_plot_that_cannot_be_written_are_said_and_keep_the_exit_code(
 @pytest.fixture
 def tiny_disk(tmp_path: Path) -> Iterator[Path]:
     """A 2 MB tmpfs (root only: skipped otherwise, with the reason)."""
-    if os.geteuid() != 0:
-        pytest.skip("mounting a tmpfs needs root; the failing write above covers what is said")
-    mount = tmp_path / f"disk-{uuid.uuid4().hex[:8]}"
-    mount.mkdir()
-    done = subprocess.run(
-        ["mount", "-t", "tmpfs", "-o", "size=2m", "tmpfs", str(mount)],
-        capture_output=True,
-        text=True,
-        check=False,
-    )
-    if done.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs here: {done.stderr.strip()}")
-    try:
+    with mounted_tmpfs(tmp_path, "2m", "the failing write above covers what is said") as mount:
         yield mount
-    finally:
-        subprocess.run(["umount", "-l", str(mount)], check=False)
 
 
 def test_space_held_at_the_start_takes_the_report_and_plot_on_a_full_disk(

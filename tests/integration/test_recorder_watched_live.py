@@ -16,7 +16,6 @@ import signal
 import subprocess
 import sys
 import time
-import uuid
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -27,6 +26,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from fault_log import FaultRecord
 from graph_utils import Children, Probe, Stamped, gauge_pa, statuses
 from sensor_msgs.msg import FluidPressure
+from tmpfs import mounted_tmpfs
 
 from catheter_models.contract import (
     CONTROL_RATE_HZ,
@@ -248,25 +248,12 @@ def test_continue_without_bag_goes_on_and_says_what_went_unrecorded(
 @pytest.fixture
 def small_disk(tmp_path: Path) -> Iterator[Path]:
     """A 40 MB tmpfs: room for a 40 s recorded run, not for much else (root only)."""
-    if os.geteuid() != 0:
-        pytest.skip(
-            "mounting a tmpfs needs root; the full-disk path is covered in-process by "
-            "tests/catheter_control/test_recorder_failure.py"
-        )
-    mount = tmp_path / f"disk-{uuid.uuid4().hex[:8]}"
-    mount.mkdir()
-    done = subprocess.run(
-        ["mount", "-t", "tmpfs", "-o", "size=40m", "tmpfs", str(mount)],
-        capture_output=True,
-        text=True,
-        check=False,
-    )
-    if done.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs here: {done.stderr.strip()}")
-    try:
+    with mounted_tmpfs(
+        tmp_path,
+        "40m",
+        "the full-disk path is covered in-process by test_recorder_failure.py",
+    ) as mount:
         yield mount
-    finally:
-        subprocess.run(["umount", "-l", str(mount)], check=False)
 
 
 def _fill(disk: Path) -> int:

@@ -11,15 +11,14 @@ from __future__ import annotations
 
 import errno
 import os
-import subprocess
 import time
-import uuid
 from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
 
 import pytest
 import yaml
+from tmpfs import mounted_tmpfs
 
 from catheter_models.bag import BagRecorder, repair_bag
 from catheter_models.bag.messages import fluid_pressure_cdr
@@ -156,22 +155,8 @@ def test_a_bag_closed_as_planned_is_finished(tmp_path: Path) -> None:
 @pytest.fixture
 def tiny_tmpfs(tmp_path: Path) -> Iterator[Path]:
     """A 512 kB tmpfs (root only: skipped otherwise, with the reason)."""
-    if os.geteuid() != 0:
-        pytest.skip("mounting a tmpfs needs root; the injected failures above cover the path")
-    mount = tmp_path / f"tmpfs-{uuid.uuid4().hex[:8]}"
-    mount.mkdir()
-    done = subprocess.run(
-        ["mount", "-t", "tmpfs", "-o", "size=512k", "tmpfs", str(mount)],
-        capture_output=True,
-        text=True,
-        check=False,
-    )
-    if done.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs here: {done.stderr.strip()}")
-    try:
+    with mounted_tmpfs(tmp_path, "512k", "the injected failures above cover the path") as mount:
         yield mount
-    finally:
-        subprocess.run(["umount", "-l", str(mount)], check=False)
 
 
 def test_a_full_disk_for_real(tiny_tmpfs: Path) -> None:
