@@ -352,11 +352,11 @@ class ExciteInProcess:
                     os.environ[key] = value
 
 
-def _commands_received(probe: Probe, node: str) -> int:
-    """``commands_received`` from ``node``'s first /diagnostics published from now on."""
+def _fresh_diagnostics(probe: Probe, node: str) -> dict[str, str]:
+    """``node``'s first /diagnostics values published from now on."""
     now_ns = probe.node.get_clock().now().nanoseconds
 
-    def latest() -> int | None:
+    def latest() -> dict[str, str] | None:
         fresh = [
             s
             for m in probe.received.get(DIAGNOSTICS.name, [])
@@ -364,12 +364,12 @@ def _commands_received(probe: Probe, node: str) -> int:
             for s in m.msg.status
             if s.name == node
         ]
-        return int(diagnostic_values(fresh[-1])["commands_received"]) if fresh else None
+        return diagnostic_values(fresh[-1]) if fresh else None
 
     probe.spin_until(lambda: latest() is not None, 3.0)
-    count = latest()
-    assert count is not None, f"no /diagnostics from {node} after the excitation"
-    return count
+    values = latest()
+    assert values is not None, f"no /diagnostics from {node} after the excitation"
+    return values
 
 
 @pytest.mark.parametrize(
@@ -417,7 +417,9 @@ def test_drivers_match_sim_hardware(rig: RigProcess, children: Children, tmp_pat
         with Probe(children.domain_id) as probe:
             _wait_streams(probe, 30.0)
             excite.run(probe, 60.0)
-            received["sim"] = _commands_received(probe, "catheter/sim_hardware")
+            received["sim"] = int(
+                _fresh_diagnostics(probe, "catheter/sim_hardware")["commands_received"]
+            )
         assert sim.stop(timeout_s=15.0) == {"sim_hardware": 0, "recorder": 0}
         t1 = time.monotonic()
 
@@ -434,7 +436,8 @@ def test_drivers_match_sim_hardware(rig: RigProcess, children: Children, tmp_pat
         with Probe(children.domain_id) as probe:
             _wait_streams(probe, 30.0)
             excite.run(probe, 60.0)
-            received["emu"] = _commands_received(probe, VALVE_DRIVER)
+            driver = _fresh_diagnostics(probe, VALVE_DRIVER)
+            received["emu"] = int(driver["commands_received"])
             state = rig.state()
             print(f"rig: {state['plant_steps']} samples, {state['steps_caught_up']} caught up late")
         t2 = time.monotonic()
@@ -528,11 +531,25 @@ def test_drivers_match_sim_hardware(rig: RigProcess, children: Children, tmp_pat
     # The mean difference shows a bias a lag cannot (the signal starts and ends at rest):
     # measured |mean| <= 0.007 deg and <= 18 Pa. 0.03 deg is 15 um of laser reference (a
     # calibration off by that fails); 100 Pa is under two DAC steps (60 Pa each).
+    # A busy host stretches valve_driver's RS485 round trip, and a reading is stamped at the
+    # middle of it: true anywhere within it, so its stamp is off by RMS round trip / sqrt(12)
+    # (uniform), which costs (RMS rate of change) x that in Pa, beside the sensor noise. The
+    # driver reports the round trip on /diagnostics; the aligned bound is widened by what it
+    # reported, no more (idle: 0.5 to 1 ms RMS, ~20 Pa; the 663 and 737 Pa failures of the
+    # 600 Pa bound came on hosts running a second test suite).
+    rtt_rms_s = float(driver["transmitter_round_trip_rms_ms"]) * 1e-3
+    rate_rms_pa_s = float(np.sqrt(np.mean(np.diff(signal_pa) ** 2))) / PERIOD_S
+    stamp_pa = rate_rms_pa_s * rtt_rms_s / math.sqrt(12.0)
+    print(
+        f"valve_driver round trip RMS {rtt_rms_s * 1e3:.2f} ms, p99 "
+        f"{driver['transmitter_round_trip_p99_ms']} ms: stamps cost {stamp_pa:.0f} Pa RMS at "
+        f"{rate_rms_pa_s / 1e3:.0f} kPa/s"
+    )
     bounds = {
         "tip/angle": {"lag_ms": (-5.0, 9.0), "rms_at_lag": 0.1, "rms": 0.2, "mean": 0.03},
         "pressure/measured": {
             "lag_ms": (-5.0, 13.0),
-            "rms_at_lag": 600.0,
+            "rms_at_lag": math.hypot(600.0, 1.5 * stamp_pa),
             "rms": 1700.0,
             "mean": 100.0,
         },

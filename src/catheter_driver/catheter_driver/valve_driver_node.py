@@ -90,6 +90,8 @@ class ValveDriverNode(LifecycleNode):
         self._loops: list[DeadlineLoop] = []
         self._stamper = MonotonicStamper(self.get_clock().now().nanoseconds)
         self._latency = LatencyWindow()
+        # The reading's stamp is uncertain by its round trip (below); a busy host stretches it.
+        self._round_trip = LatencyWindow(name="transmitter_round_trip")
         self._last_tick_state = "unconfigured"
         self._last_reason = "not configured"
         self._pub_measured = qos.overridable_publisher(
@@ -261,8 +263,12 @@ class ValveDriverNode(LifecycleNode):
         gauge_pa = core.poll_pressure(start)
         if gauge_pa is None:
             return
-        # The reading is true somewhere within the round trip; its middle is the best guess.
-        sample_s = 0.5 * (start + time.monotonic())
+        # The reading is true somewhere within the round trip; its middle is the best guess,
+        # off by up to half the round trip (RMS round trip / sqrt(12) if uniform), which
+        # /diagnostics reports: on a busy host it, not the transmitter, limits the stamps.
+        end = time.monotonic()
+        self._round_trip.add(end - start)
+        sample_s = 0.5 * (start + end)
         self._pub_measured.publish(
             messages.fluid_pressure(gauge_pa, self._stamper.ns(sample_s), "", self.ambient_pa)
         )
@@ -292,6 +298,7 @@ class ValveDriverNode(LifecycleNode):
             "reason": self._last_reason,
             "realtime": self._loops[0].realtime if self._loops else "not active",
             **self._latency.summary_ms(),
+            **self._round_trip.summary_ms(),
         }
         level = diagnostics.OK if self._last_tick_state == "ok" else diagnostics.WARN
         if self._last_tick_state in {"link_down", "error"}:

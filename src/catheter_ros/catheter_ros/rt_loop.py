@@ -222,26 +222,31 @@ class LatencyWindow:
 
     Args:
         window: number of recent samples kept for percentiles.
+        name: prefix of the diagnostics keys (``<name>_p50_ms`` ...).
     """
 
-    def __init__(self, window: int = 5000) -> None:
+    def __init__(self, window: int = 5000, name: str = "command_latency") -> None:
         self._samples: deque[float] = deque(maxlen=window)
+        self.name = name
 
     def add(self, latency_s: float) -> None:
         """One message's latency [s]."""
         self._samples.append(latency_s)
 
     def summary_ms(self) -> dict[str, str]:
-        """p50, p99 and max over the window [ms], formatted for /diagnostics ('' if empty)."""
+        """p50, p99, max and RMS over the window [ms], formatted for /diagnostics ('' if empty).
+
+        The RMS is what a stamp uncertainty costs a signal (RMS error = rate x RMS timing
+        error), which the percentiles do not give.
+        """
+        keys = [f"{self.name}_{k}_ms" for k in ("p50", "p99", "max", "rms")]
         if not self._samples:
-            return {
-                "command_latency_p50_ms": "",
-                "command_latency_p99_ms": "",
-                "command_latency_max_ms": "",
-            }
+            return dict.fromkeys(keys, "")
         ms = np.fromiter(self._samples, float) * 1e3
-        return {
-            "command_latency_p50_ms": f"{np.percentile(ms, 50):.3f}",
-            "command_latency_p99_ms": f"{np.percentile(ms, 99):.3f}",
-            "command_latency_max_ms": f"{ms.max():.3f}",
-        }
+        values = (
+            np.percentile(ms, 50),
+            np.percentile(ms, 99),
+            ms.max(),
+            np.sqrt(np.mean(ms**2)),
+        )
+        return {k: f"{v:.3f}" for k, v in zip(keys, values, strict=True)}
