@@ -16,8 +16,8 @@ cleanly.
 
 ROS arguments after ``--ros-args`` go to every node (``-r __ns:=/x`` sets the namespace), and
 every node refuses a parameter it does not have: the compensator's choices are ``bringup``'s own
-flags (``--compensator``, ``--model-dir``, ``--feedback``, ``--feedback-gains``), the simulated
-rig's are ``--sim-param`` and ``--plant``.
+flags (``--compensator``, ``--model-dir``, ``--feedback``, ``--feedback-gains``,
+``--feedforward-shaping``), the simulated rig's are ``--sim-param`` and ``--plant``.
 
 Before anything starts, ``bringup`` looks for nodes already in its namespace on its ROS domain
 (:data:`catheter_control.local_graph.DISCOVERY_WAIT_S`) and refuses to start a second graph
@@ -514,6 +514,7 @@ OWN_FLAGS = {
     "model_dir": "--model-dir",
     "feedback": "--feedback",
     "feedback_gains": "--feedback-gains",
+    "feedforward_shaping": "--feedforward-shaping",
     "plant": "--plant",
 }
 """Node parameters a launcher takes as its own flags: given after ``--ros-args`` they would
@@ -542,6 +543,7 @@ def add_graph_choices(parser: argparse.ArgumentParser, *, domain_default: str | 
     """The flags ``bringup`` and ``follow_trajectory --sim`` share (controller, plant, domain)."""
     from catheter_control.graph_domain import domain_id_argument
     from catheter_control.models import COMPENSATORS, DEFAULT_COMPENSATOR, FEEDBACKS
+    from catheter_models.shaping import SHAPERS
 
     parser.add_argument(
         "--compensator",
@@ -570,6 +572,14 @@ def add_graph_choices(parser: argparse.ArgumentParser, *, domain_default: str | 
         default="",
         help="feedback.json written by catheter-lab tune ('' = the one in --model-dir, or the "
         "shipped one, tuned on the simulated rig)",
+    )
+    parser.add_argument(
+        "--feedforward-shaping",
+        choices=SHAPERS,
+        default=None,
+        help="input shaping of the compensator's pressure (zvd: does not ring the tip mode "
+        "that --feedback-gains' tuning identified); default: what a commissioned --model-dir "
+        "was verified with, else none",
     )
     parser.add_argument(
         "--plant",
@@ -614,6 +624,8 @@ def compensator_choice(args: argparse.Namespace) -> dict[str, object]:
         # seal, its tuned range or the envelope stops bringup (exit 2) before any node starts.
         FeedbackGains.load(args.feedback_gains)
         params["feedback_gains"] = str(args.feedback_gains)
+    if args.feedforward_shaping is not None:
+        params["feedforward_shaping"] = args.feedforward_shaping
     return params
 
 

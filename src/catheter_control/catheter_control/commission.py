@@ -252,12 +252,35 @@ class Commission:
         """A compensator's model directory."""
         return self.out_dir / "candidates" / kind
 
+    def tip_mode_hz(self) -> float:
+        """The ringing tip the tuned loop has [Hz] (0: none found, or not tuned yet)."""
+        path = self.tune_dir / "feedback.json"
+        if not path.exists():
+            return 0.0
+        loop = json.loads(path.read_text()).get("tuning", {}).get("loop", {})
+        return float(loop.get("resonance_hz", 0.0) or 0.0)
+
     def candidates(self) -> list[Candidate]:
-        """The compensators fitted so far, each with the tuned PI."""
+        """The compensators fitted so far, each with the tuned PI.
+
+        Where the tuned loop has a ringing tip, each is tried with its pressure input-shaped
+        (``zvd``) as well: a hysteresis inverse kinks the pressure at every reversal and rings
+        the tip, which the PI, held to a crossover below the mode, cannot undo.
+        """
         kinds = ["idrdpi"] + (["clstm"] if self.clstm_budget_s > 0 else [])
+        shapings = ["none"] + (["zvd"] if self.tip_mode_hz() > 0.0 else [])
+        gains = self.tune_dir / "feedback.json"
         return [
-            Candidate(f"{k}+pi", k, self.candidate_dir(k), "pi", self.tune_dir / "feedback.json")
+            Candidate(
+                f"{k}+pi" if shaping == "none" else f"{k}+{shaping}+pi",
+                k,
+                self.candidate_dir(k),
+                "pi",
+                gains,
+                shaping,
+            )
             for k in kinds
+            for shaping in shapings
         ]
 
     # -- running steps --------------------------------------------------------------------
@@ -468,7 +491,7 @@ class Commission:
         record.commands.append(
             f"follow_trajectory --preset {trajectory} --model-dir {candidate.model_dir} "
             f"--compensator {candidate.compensator} --feedback pi --feedback-gains "
-            f"{candidate.feedback_gains}"
+            f"{candidate.feedback_gains} --feedforward-shaping {candidate.feedforward_shaping}"
         )
         run = self.rig.follow(
             plan,
@@ -522,6 +545,7 @@ class Commission:
         commissioned = {
             "compensator": candidate.compensator,
             "feedback": candidate.feedback,
+            "feedforward_shaping": candidate.feedforward_shaping,
             "rig": self.choice.to_dict(),
             "rmse_deg": complete[best],
             "target_rmse_deg": TARGET_RMSE_DEG,

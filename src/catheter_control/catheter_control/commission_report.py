@@ -128,7 +128,14 @@ def write_report(
         f = select.facts
         parts.append(
             f"<p><b>Commissioned:</b> {html.escape(str(f['compensator']))} with feedback "
-            f"{html.escape(str(f['feedback']))}, in <code>{_rel(model_dir, out)}"
+            f"{html.escape(str(f['feedback']))}"
+            + (
+                f" and its pressure input-shaped ({html.escape(str(f['feedforward_shaping']))}) "
+                "against the tip's ringing"
+                if f.get("feedforward_shaping", "none") != "none"
+                else ""
+            )
+            + f", in <code>{_rel(model_dir, out)}"
             "</code>: <code>follow_trajectory --model-dir "
             f"{html.escape(str(model_dir))}</code></p>"
         )

@@ -118,6 +118,7 @@ class Candidate:
         model_dir: Its model directory.
         feedback: ``pi`` or ``none``.
         feedback_gains: The ``feedback.json`` that ``catheter-lab tune`` wrote.
+        feedforward_shaping: ``none``, or ``zvd`` when the tuned loop has a ringing tip.
     """
 
     name: str
@@ -125,6 +126,7 @@ class Candidate:
     model_dir: Path
     feedback: str
     feedback_gains: Path
+    feedforward_shaping: str = "none"
 
     def params(self, control_rate_hz: float) -> dict[str, object]:
         """The compensator node's parameters."""
@@ -134,6 +136,7 @@ class Candidate:
             "model_dir": str(self.model_dir),
             "feedback": self.feedback,
             "feedback_gains": str(self.feedback_gains),
+            "feedforward_shaping": self.feedforward_shaping,
             # The rig has a laser: stop if it goes quiet, as follow_trajectory --sim does.
             "require_tip_angle": True,
         }

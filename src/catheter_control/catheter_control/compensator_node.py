@@ -27,6 +27,11 @@ has none, when a gain lies outside the range its tuning recorded, or when its au
 authority timeout is beyond the contract's envelope (``catheter_models.feedback.seal``). The tip
 angle is then required whatever ``require_tip_angle`` says: feedback never runs on a stale
 stream, and a non-finite sample holds it (counted on ``/diagnostics``).
+
+With ``feedforward_shaping:=zvd`` the compensator's pressure is input-shaped so it does not
+ring the tip mode that the same ``feedback.json``'s tuning identified, and the compensator
+reads the plan the shaper's delay earlier, so the shaped pressure arrives on time
+(``catheter_models.shaping``). A loop with no tip mode is refused at configure.
 """
 
 from __future__ import annotations
@@ -50,8 +55,10 @@ from catheter_control.models import (
     FEEDBACKS,
     load_compensator,
     load_feedback,
+    load_shaping,
     resolve_compensator,
     resolve_feedback,
+    resolve_shaping,
 )
 from catheter_control.trajectory import TrajectoryLimits, TrajectoryPlan
 from catheter_control.trajectory_action import RunProgress, TrajectoryActionServer
@@ -70,6 +77,7 @@ from catheter_models.contract import (
 )
 from catheter_models.errors import CatheterError, ParameterError
 from catheter_models.plant.config import ParamSpec
+from catheter_models.shaping import SHAPERS
 from catheter_models.units import AMBIENT_PRESSURE_PA, deg_to_rad, rad_to_deg
 from catheter_ros import diagnostics, messages, qos
 from catheter_ros.loop_node import LifecycleLoopNode
@@ -147,6 +155,18 @@ class CompensatorNode(LifecycleLoopNode):
                 "feedback.json (or its directory); '' = the one in model_dir, or the shipped one",
             )
         )
+        shaping = str(
+            declare_plain(
+                self,
+                "feedforward_shaping",
+                "",
+                f"input shaping of the feedforward: one of {', '.join(SHAPERS)} (zvd: does not "
+                "ring the tip that feedback_gains' tuning identified; '' = what a commissioned "
+                "model_dir was verified with, else none)",
+            )
+        )
+        self._shaping_asked = shaping or None
+        self.shaping_kind = shaping or "none"
         self.rate_hz = declare_float(self, "control_rate_hz", _RATE)
         self.pmin_pa = declare_float(self, "min_pressure_pa", _PMIN)
         self.pmax_pa = declare_float(self, "max_pressure_pa", _PMAX)
@@ -227,7 +247,13 @@ class CompensatorNode(LifecycleLoopNode):
                 self.feedback_kind, self.gains_path, self.model_dir, self.rate_hz
             )
             self.kind = resolve_compensator(self._kind_asked, self.model_dir)
-            compensator = load_compensator(self.kind, self.model_dir)
+            self.shaping_kind = resolve_shaping(self._shaping_asked, self.model_dir)
+            compensator = load_shaping(
+                self.shaping_kind,
+                load_compensator(self.kind, self.model_dir),
+                self.gains_path,
+                self.model_dir,
+            )
         except CatheterError as exc:
             self.fail_transition("configure", str(exc))
             return TransitionCallbackReturn.FAILURE
@@ -649,6 +675,7 @@ class CompensatorNode(LifecycleLoopNode):
                 "model_rate_hz": f"{self.model_rate_hz:g}" if self.model_rate_hz else "any",
                 "model_steps": model_steps,
                 "feedback": self.feedback_kind,
+                "feedforward_shaping": self.shaping_kind,
                 **fb_values,
                 "fault": fault,
                 "hold_deg": "" if hold_rad is None else f"{rad_to_deg(hold_rad):.2f}",

@@ -30,6 +30,7 @@ from lifecycle_msgs.msg import Transition
 
 from catheter_control.models import COMPENSATORS, DEFAULT_COMPENSATOR, FEEDBACKS
 from catheter_models.contract import CONTROL_RATE_HZ
+from catheter_models.shaping import SHAPERS
 
 
 def configure_then_activate(node: LifecycleNode) -> list[Any]:
@@ -109,6 +110,14 @@ def compensator_arguments(
             default_value="",
             description="feedback.json from catheter-lab tune ('' = the one in model_dir, or "
             "the shipped one, tuned on the simulated rig)",
+        ),
+        DeclareLaunchArgument(
+            "feedforward_shaping",
+            default_value="",
+            choices=["", *SHAPERS],
+            description="input shaping of the feedforward (zvd: does not ring the tip mode "
+            "that feedback_gains' tuning identified); '' = what a commissioned model_dir was "
+            "verified with, else none",
         ),
         DeclareLaunchArgument(
             "require_tip_angle",
@@ -212,6 +221,9 @@ def compensator_node(namespace: LaunchConfiguration, rt_priority: ParameterValue
                 "feedback": ParameterValue(LaunchConfiguration("feedback"), value_type=str),
                 "feedback_gains": ParameterValue(
                     LaunchConfiguration("feedback_gains"), value_type=str
+                ),
+                "feedforward_shaping": ParameterValue(
+                    LaunchConfiguration("feedforward_shaping"), value_type=str
                 ),
                 "control_rate_hz": ParameterValue(
                     LaunchConfiguration("control_rate_hz"), value_type=float

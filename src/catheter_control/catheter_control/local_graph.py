@@ -23,7 +23,12 @@ from catheter_control.bringup import (
     sim_graph_specs,
 )
 from catheter_control.graph_domain import choose_domain, default_domain_choice
-from catheter_control.models import SHIPPED, resolve_compensator, resolve_feedback
+from catheter_control.models import (
+    SHIPPED,
+    resolve_compensator,
+    resolve_feedback,
+    resolve_shaping,
+)
 from catheter_models.errors import CatheterError, GraphConflictError
 from catheter_models.geometry import Calibration
 from catheter_models.plant import PlantConfig
@@ -68,6 +73,7 @@ def prepare_local_graph(args: argparse.Namespace) -> None:
     args.compensator = resolve_compensator(args.compensator, args.model_dir)
     # A commissioned model directory runs with the feedback it was verified with.
     args.feedback = resolve_feedback(args.feedback, args.model_dir)
+    args.feedforward_shaping = resolve_shaping(args.feedforward_shaping, args.model_dir)
     choose_domain(default_domain_choice(args.domain_id), args.namespace, "follow_trajectory")
 
 
@@ -108,6 +114,7 @@ def start_local_graph(
         "model_dir": args.model_dir or f"shipped ({SHIPPED[args.compensator]})",
         "feedback": args.feedback,
         "feedback_gains": args.feedback_gains or "beside the model (or shipped)",
+        "feedforward_shaping": args.feedforward_shaping,
         "plant": args.plant or "shipped",
     }
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -121,6 +128,7 @@ def start_local_graph(
             "model_dir": args.model_dir,
             "feedback": args.feedback,
             "feedback_gains": args.feedback_gains,
+            "feedforward_shaping": args.feedforward_shaping,
             # The local rig has a laser: stop if it goes quiet (a patient's would not).
             "require_tip_angle": True,
         },

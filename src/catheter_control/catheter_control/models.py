@@ -12,9 +12,11 @@ from importlib import resources
 from pathlib import Path
 
 from catheter_control.control_core import StaticInverseCompensator, StreamingCompensator
+from catheter_models.contract import CONTROL_RATE_HZ
 from catheter_models.errors import ParameterError
 from catheter_models.feedback import GAINS_FILE, FeedbackGains, PIDFeedback
 from catheter_models.models.base import Stream
+from catheter_models.shaping import SHAPERS, InputShaper, ShaperStream
 from catheter_models.static_map import StaticMap
 
 COMPENSATORS = ("none", "idrdpi", "clstm")
@@ -86,6 +88,49 @@ COMMISSIONED_FILE = "commissioned.json"
 """Written by ``commission`` into the model directory it chose: how to run it (its feedback)."""
 
 
+def _commissioned(model_dir: str, key: str) -> object | None:
+    """``key`` of the ``commissioned.json`` in ``model_dir``, or None when there is none.
+
+    Raises:
+        ParameterError: a ``commissioned.json`` that is not one.
+    """
+    import json
+
+    path = Path(model_dir) / COMMISSIONED_FILE if model_dir else None
+    if path is None or not path.exists():
+        return None
+    try:
+        record = json.loads(path.read_text())
+        if not isinstance(record, dict) or "feedback" not in record:
+            raise KeyError("feedback")
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ParameterError(f"{path} is not a commissioning record: {exc!r}") from None
+    return record.get(key)
+
+
+def resolve_shaping(kind: str | None, model_dir: str) -> str:
+    """The feedforward shaping to run: ``kind`` if given, else what ``commission`` chose.
+
+    Raises:
+        ParameterError: unknown ``kind``, or a ``commissioned.json`` naming an unknown one.
+    """
+    if kind is not None:
+        if kind not in SHAPERS:
+            raise ParameterError(
+                f"unknown feedforward shaping {kind!r}; available: {', '.join(SHAPERS)}"
+            )
+        return kind
+    held = _commissioned(model_dir, "feedforward_shaping")
+    if held is None:
+        return "none"
+    if held not in SHAPERS:
+        raise ParameterError(
+            f"{Path(model_dir) / COMMISSIONED_FILE} names feedforward shaping {held!r}; "
+            f"available: {', '.join(SHAPERS)}"
+        )
+    return str(held)
+
+
 def resolve_feedback(kind: str | None, model_dir: str) -> str:
     """The feedback to run: ``kind`` if given, else what ``commission`` ran the model with.
 
@@ -96,21 +141,18 @@ def resolve_feedback(kind: str | None, model_dir: str) -> str:
     Raises:
         ParameterError: unknown ``kind``, or a ``commissioned.json`` that is not one.
     """
-    import json
-
     if kind is not None:
         if kind not in FEEDBACKS:
             raise ParameterError(f"unknown feedback {kind!r}; available: {', '.join(FEEDBACKS)}")
         return kind
-    path = Path(model_dir) / COMMISSIONED_FILE if model_dir else None
-    if path is None or not path.exists():
+    held = _commissioned(model_dir, "feedback")
+    if held is None:
         return "none"
-    try:
-        held = json.loads(path.read_text())["feedback"]
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise ParameterError(f"{path} is not a commissioning record: {exc!r}") from None
     if held not in FEEDBACKS:
-        raise ParameterError(f"{path} names feedback {held!r}; available: {', '.join(FEEDBACKS)}")
+        raise ParameterError(
+            f"{Path(model_dir) / COMMISSIONED_FILE} names feedback {held!r}; "
+            f"available: {', '.join(FEEDBACKS)}"
+        )
     return str(held)
 
 
@@ -172,6 +214,70 @@ def load_compensator(kind: str, model_dir: str) -> StreamingCompensator:
     )
 
 
+class ShapedCompensator:
+    """A compensator whose pressure is input-shaped so it does not ring the tip.
+
+    The inner compensator reads the plan the shaper's mean delay earlier than it would alone
+    (its own preview plus the shaper's), so the shaped pressure arrives on time
+    (:mod:`catheter_models.shaping`). A stateless inner map is stepped at the contract's
+    control rate: the shaper needs a fixed grid.
+    """
+
+    def __init__(self, inner: StreamingCompensator, shaper: InputShaper) -> None:
+        self.inner = inner
+        self.shaper = shaper
+        self.sample_period_s: float | None = inner.sample_period_s or 1.0 / CONTROL_RATE_HZ
+        self.preview_s = inner.preview_s + shaper.mean_delay_s
+        self._stream = ShaperStream(shaper, self.sample_period_s)
+        self.label = f"{getattr(inner, 'label', type(inner).__name__)}, {shaper.describe()}"
+
+    def reset(self) -> None:
+        """Back to rest, the shaper's memory too."""
+        self.inner.reset()
+        self._stream.reset()
+
+    def step(self, angle_desired_rad: float) -> float:
+        """The inner compensator's pressure for the (earlier read) bend, shaped."""
+        return self._stream.step(self.inner.step(angle_desired_rad))
+
+
+def gains_file(gains_path: str, model_dir: str) -> Path:
+    """The ``feedback.json`` in force: ``gains_path``, else the model directory's, else shipped."""
+    if gains_path:
+        return Path(gains_path)
+    if model_dir:
+        return Path(model_dir) / GAINS_FILE
+    return shipped_model_dir(SHIPPED_GAINS) / GAINS_FILE
+
+
+def load_shaping(
+    kind: str, compensator: StreamingCompensator, gains_path: str, model_dir: str
+) -> StreamingCompensator:
+    """``compensator`` with the feedforward shaping ``kind`` around it (``none``: as it is).
+
+    The tip's mode comes from the loop that ``catheter-lab tune`` identified, recorded in the
+    sealed ``feedback.json`` in force (as :func:`load_feedback` finds it), so the shaper and
+    the feedback are designed on the same identified loop and an edited mode is refused by
+    the seal.
+
+    Raises:
+        ParameterError: unknown kind, a gains file that is missing or malformed, or a loop
+            with no tip resonance.
+        FeedbackFileError: the file fails its seal, its tuned range or the envelope.
+    """
+    if kind not in SHAPERS:
+        raise ParameterError(
+            f"unknown feedforward shaping {kind!r}; available: {', '.join(SHAPERS)}"
+        )
+    if kind == "none":
+        return compensator
+    path = gains_file(gains_path, model_dir)
+    gains = FeedbackGains.load(path)
+    shaper = InputShaper.of_loop(kind, gains.tuning.get("loop", {}), str(path))
+    assert shaper is not None  # kind is not none
+    return ShapedCompensator(compensator, shaper)
+
+
 def load_feedback(kind: str, gains_path: str, model_dir: str, rate_hz: float) -> PIDFeedback | None:
     """The feedback the node runs: None for ``none``, else PI with gains from a file.
 
@@ -195,10 +301,4 @@ def load_feedback(kind: str, gains_path: str, model_dir: str, rate_hz: float) ->
         raise ParameterError(f"unknown feedback {kind!r}; available: {', '.join(FEEDBACKS)}")
     if kind == "none":
         return None
-    if gains_path:
-        path = Path(gains_path)
-    elif model_dir:
-        path = Path(model_dir) / GAINS_FILE
-    else:
-        path = shipped_model_dir(SHIPPED_GAINS) / GAINS_FILE
-    return PIDFeedback(FeedbackGains.load(path), rate_hz)
+    return PIDFeedback(FeedbackGains.load(gains_file(gains_path, model_dir)), rate_hz)
