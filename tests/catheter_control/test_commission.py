@@ -138,6 +138,17 @@ def test_the_response_check_names_what_does_not_move(
         assert found == ""
 
 
+def test_a_recording_missing_commands_is_refused_past_its_limit() -> None:
+    def check(missing: int) -> ResponseCheck:
+        return ResponseCheck("train", 2.9, 2.9, 25.0, 240.0, 60000, 60000, missing)
+
+    assert check(0).problem() == ""
+    assert check(1111).problem() == ""  # 1.9 %: a busy host's skipped ticks, held
+    found = check(13151).problem()  # 22 %: seen on a foreign plant, a starved excite
+    assert "13151 of 60000 commands (21.9%) are missing" in found
+    assert "limit 5%" in found and "held commands" in found
+
+
 def test_the_protocols_are_signals_excite_knows() -> None:
     for protocol in cm.PROTOCOLS:
         signals = cm.protocol_signals(protocol)

@@ -44,6 +44,7 @@ from pathlib import Path
 from typing import Any
 
 from catheter_control.commission_rig import (
+    MAX_COMMANDS_LOST_SHARE,
     Candidate,
     CommissionRig,
     RigChoice,
@@ -412,7 +413,15 @@ class Commission:
         record.facts["check"] = check.to_dict()
         problem = check.problem()
         if problem:
-            raise RigError(f"the rig does not respond: {problem}")
+            # Either the rig does not respond or the recording is not fit to learn from.
+            raise RigError(problem)
+        if check.commands_missing:
+            print(
+                f"commission: {bag.name}: {check.commands_missing} of "
+                f"{check.commands_expected} commands missing from the recording "
+                f"({check.commands_missing_share:.2%}; refused above "
+                f"{MAX_COMMANDS_LOST_SHARE:.0%})"
+            )
         print(
             f"commission: {bag.name}: {check.duration_s:.0f} s, command spans "
             f"{check.command_span_bar:.2f} bar, measured {check.measured_span_bar:.2f} bar, "

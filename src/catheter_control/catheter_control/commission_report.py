@@ -171,7 +171,9 @@ def write_report(
             f"{check.get('samples', 0)} samples at the model rate; command spans "
             f"{check.get('command_span_bar', 0):.2f} bar, measured pressure "
             f"{check.get('measured_span_bar', 0):.2f} bar, bend "
-            f"{check.get('bend_span_deg', 0):.1f}°.</p>"
+            f"{check.get('bend_span_deg', 0):.1f}°; "
+            f"{check.get('commands_missing', 0)} of {check.get('commands_expected', 0)} commands "
+            "missing from the recording.</p>"
         )
         plot = _recording_plot(bag, out / f"recording_{part}.png")
         if plot is not None:

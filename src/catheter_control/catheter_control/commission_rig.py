@@ -71,6 +71,14 @@ MIN_PRESSURE_FOLLOW = 0.2
 """The measured pressure must span at least this share of the commanded span."""
 MIN_BEND_SPAN_DEG = 1.0
 """The bend must span at least this much when the pressure spans a bar or more."""
+MAX_COMMANDS_LOST_SHARE = 0.05
+"""Past this share of the excitation's commands missing from the recording, it is not used.
+
+A command missing from the bag is a tick ``excite`` skipped (the plant then held the one
+before, which the resampling's hold reproduces) or one DDS lost on its way to the recorder
+(the plant got it, the bag holds the one before): either way the models learn from a held
+command. A few are harmless; a fifth (seen on a foreign plant, a pure-Python plugin in a
+real-time ``sim_hardware`` on two busy cores) is a host too busy to record on."""
 
 
 class RigError(CatheterError):
@@ -483,9 +491,24 @@ class ResponseCheck:
     bend_span_deg: float
     duration_s: float
     samples: int
+    commands_expected: int = 0
+    commands_missing: int = 0
+
+    @property
+    def commands_missing_share(self) -> float:
+        """Share of the excitation's commands (one per tick) the recording lacks."""
+        return self.commands_missing / self.commands_expected if self.commands_expected else 0.0
 
     def problem(self) -> str:
-        """'' for a rig that responds, else what does not."""
+        """'' for a rig that responds and a recording fit to learn from, else what is not."""
+        if self.commands_missing_share > MAX_COMMANDS_LOST_SHARE:
+            return (
+                f"{self.bag}: {self.commands_missing} of {self.commands_expected} commands "
+                f"({self.commands_missing_share:.1%}) are missing from the recording (limit "
+                f"{MAX_COMMANDS_LOST_SHARE:.0%}): excite skipped its ticks or DDS dropped them, "
+                "so the models would learn from held commands; the host is too busy to record "
+                "on (what runs beside it?)"
+            )
         if self.command_span_bar * 1e5 < MIN_COMMAND_SPAN_PA:
             return (
                 f"{self.bag}: the command spans only {self.command_span_bar:.2f} bar; the "
@@ -514,12 +537,20 @@ class ResponseCheck:
             "bend_span_deg": self.bend_span_deg,
             "duration_s": self.duration_s,
             "samples": self.samples,
+            "commands_expected": self.commands_expected,
+            "commands_missing": self.commands_missing,
         }
 
 
 def check_response(bag_path: Path) -> ResponseCheck:
     """Spans (5th to 95th percentile, so a spike or a glitch does not count as motion)."""
-    series = load_bag(bag_path).aligned(SENSOR_RATE_HZ)
+    bag = load_bag(bag_path)
+    series = bag.aligned(SENSOR_RATE_HZ)
+    # excite stamps every command with its tick's deadline, so the stamps say how many ticks
+    # the excitation had and which are missing.
+    stamps_s = bag.pressure_command.t_s
+    span_s = float(stamps_s[-1] - stamps_s[0]) if stamps_s.size else -1.0 / CONTROL_RATE_HZ
+    expected = round(span_s * CONTROL_RATE_HZ) + 1
 
     def span(values: np.ndarray) -> float:
         low, high = np.percentile(values, [5.0, 95.0])
@@ -532,4 +563,6 @@ def check_response(bag_path: Path) -> ResponseCheck:
         bend_span_deg=float(np.degrees(span(np.asarray(series.angle_rad)))),
         duration_s=float(series.t_s[-1] - series.t_s[0]),
         samples=int(series.t_s.size),
+        commands_expected=expected,
+        commands_missing=max(expected - int(stamps_s.size), 0),
     )

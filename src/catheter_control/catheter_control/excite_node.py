@@ -114,6 +114,9 @@ class ExciteNode(LoopNode):
         self.ramp_pa_per_s = ramp_pa_per_s
         self._sent_i = -1
         """Index of the newest sample published (loop thread); -1 before the first."""
+        self.published = 0
+        """Samples published: fewer than the signal's when the loop missed deadlines (a
+        skipped tick's sample is never sent; its stamp is a gap in the recording)."""
         self.spec_names = [spec.name for spec in specs]
         self.signal_name = name
         self.done = threading.Event()
@@ -158,6 +161,7 @@ class ExciteNode(LoopNode):
             messages.fluid_pressure(float(self.values_pa[i]), stamp_ns, "", self.ambient_pa)
         )
         self._sent_i = i
+        self.published += 1
 
     def close(self) -> None:
         """Stop sending (idempotent); stopped mid-signal, ramp to zero first.
@@ -204,7 +208,17 @@ def main(args: list[str] | None = None) -> None:
         rclpy.logging.get_logger("excite").fatal(nodes[0].failure)
         code = 3
     elif code == 0 and nodes:
-        nodes[0].get_logger().info(f"signal {nodes[0].signal_name!r} sent")
+        node = nodes[0]
+        skipped = node.values_pa.size - node.published
+        said = f"signal {node.signal_name!r} sent"
+        if skipped > 0:
+            # Nothing lost silently: the plant held the previous command through each.
+            node.get_logger().warning(
+                f"{said}: {skipped} of {node.values_pa.size} samples skipped "
+                f"({skipped / node.values_pa.size:.2%}): the loop missed their deadlines"
+            )
+        else:
+            node.get_logger().info(f"{said}, every sample on time")
     if code:
         raise SystemExit(code)
 
