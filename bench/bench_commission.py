@@ -126,6 +126,14 @@ def run_one(plant: str, out: Path, domain_id: int, args: argparse.Namespace) -> 
         "step_seconds": times,
         "scores_rmse_deg": scores,
         "chosen": chosen.get("compensator"),
+        "chosen_feedforward_shaping": chosen.get("feedforward_shaping", "none"),
+        "commands_missing": {
+            part: steps.get(f"record_{part}", {})
+            .get("facts", {})
+            .get("check", {})
+            .get("commands_missing")
+            for part in ("train", "test")
+        },
         "chosen_rmse_deg": chosen.get("rmse_deg", {}),
         "misses": chosen.get("misses", {}),
         "explain_changes": [

@@ -53,6 +53,7 @@ from catheter_control.models import (
     COMPENSATORS,
     DEFAULT_COMPENSATOR,
     FEEDBACKS,
+    ShapedCompensator,
     load_compensator,
     load_feedback,
     load_shaping,
@@ -323,6 +324,8 @@ class CompensatorNode(LifecycleLoopNode):
             else f", feedback {self.feedback_kind} (kp {feedback.gains.kp_pa_per_rad:.4g} Pa/rad, "
             f"ki {feedback.gains.ki_pa_per_rad_s:.4g} Pa/(rad s))"
         )
+        if isinstance(compensator, ShapedCompensator):
+            fb_text += f", feedforward shaped: {compensator.shaper.describe()}"
         self.get_logger().info(
             f"compensator {self.kind!r} at {self.rate_hz:g} Hz{model_rate}{fb_text}; "
             f"requires {', '.join(required) or 'no sensor stream'}"

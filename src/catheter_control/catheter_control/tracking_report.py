@@ -325,6 +325,7 @@ Report = dict[str, str]
 _CONTROLLER_KEYS = (
     "compensator",
     "feedback",
+    "feedforward_shaping",
     "feedback_untrusted_samples",
     "feedback_saturated_ticks",
     "feedback_integral_pa",
