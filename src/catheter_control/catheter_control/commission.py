@@ -337,32 +337,6 @@ class Commission:
         forward = self.out_dir / "forward"
         self.step("explain", "explain the catheter (lab)", self._explain, forward / "explain")
         self.step(
-            "idrdpi",
-            "fit the inverse DRDPI compensator",
-            lambda rec: run_lab(
-                [
-                    "train",
-                    "idrdpi",
-                    "--train",
-                    train,
-                    "--validate",
-                    test,
-                    "--quiet",
-                    "-o",
-                    str(self.candidate_dir("idrdpi")),
-                ],
-                rec,
-            ),
-            self.candidate_dir("idrdpi"),
-        )
-        if self.clstm_budget_s > 0:
-            self.step(
-                "clstm",
-                f"fit the c-LSTM ({self.clstm_budget_s:g} s budget)",
-                self._clstm,
-                self.candidate_dir("clstm"),
-            )
-        self.step(
             "tune",
             "tune the PI on the measured bend",
             lambda rec: run_lab(
@@ -378,6 +352,19 @@ class Commission:
             ),
             self.tune_dir / "feedback.json",
         )
+        self.step(
+            "idrdpi",
+            "fit the inverse DRDPI compensator (told the tuned loop's dead time)",
+            functools.partial(self._idrdpi, train, test),
+            self.candidate_dir("idrdpi"),
+        )
+        if self.clstm_budget_s > 0:
+            self.step(
+                "clstm",
+                f"fit the c-LSTM ({self.clstm_budget_s:g} s budget)",
+                self._clstm,
+                self.candidate_dir("clstm"),
+            )
         for candidate in self.candidates():
             for trajectory in self.trajectories:
                 run_dir = self.out_dir / "runs" / candidate.name / trajectory
@@ -454,6 +441,46 @@ class Commission:
         run_lab(argv, record)
         explanation = json.loads((forward / "explain" / "explanation.json").read_text())
         record.facts["explanation"] = explanation
+
+    def dead_time_s(self) -> float:
+        """The tuned loop's dead time and lag, whole samples of the control rate [s].
+
+        A first-order lag is, to first order, a dead time of its time constant, so the two
+        are read ahead together; under one sample is none.
+        """
+        path = self.tune_dir / "feedback.json"
+        loop = json.loads(path.read_text()).get("tuning", {}).get("loop", {})
+        seconds = float(loop.get("delay_s", 0.0)) + float(loop.get("time_constant_s", 0.0))
+        return round(seconds * self.control_rate_hz) / self.control_rate_hz
+
+    def _idrdpi(self, train: str, test: str, record: StepRecord) -> None:
+        out = self.candidate_dir("idrdpi")
+        if out.exists():
+            shutil.rmtree(out)  # left by an interrupted run: train wants a new directory
+        preview_s = self.dead_time_s()
+        record.facts["preview_s"] = preview_s
+        print(
+            f"commission: the tuned loop's dead time is {preview_s * 1e3:.0f} ms: the IDRDPI "
+            "is fitted across it and reads the plan that much ahead"
+            if preview_s > 0.0
+            else "commission: the tuned loop has no dead time of a sample or more"
+        )
+        run_lab(
+            [
+                "train",
+                "idrdpi",
+                "--train",
+                train,
+                "--validate",
+                test,
+                "--set",
+                f"preview_s={preview_s:.6g}",
+                "--quiet",
+                "-o",
+                str(out),
+            ],
+            record,
+        )
 
     def _clstm(self, record: StepRecord) -> None:
         try:

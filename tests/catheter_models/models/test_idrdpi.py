@@ -23,6 +23,7 @@ from catheter_models.models.idrdpi import (
     frequency_tag_hz,
     group_by_frequency,
 )
+from catheter_models.plant import PlantConfig
 from catheter_models.signals import training_set
 from catheter_models.units import deg_to_rad, rad_to_deg
 
@@ -127,6 +128,51 @@ def test_each_method_fits_and_tracks_better_than_doing_nothing(
     np.testing.assert_array_equal(loaded.predict(desired), model.predict(desired))
 
 
+def test_a_dead_time_read_ahead_tracks_a_delayed_plant_and_survives_saving(
+    tmp_path: Path,
+) -> None:
+    # Our plant with 80 ms of transport delay. A delay commutes with the hysteresis, so an
+    # IDRDPI told the dead time (as commission tells it what tune found) must track the
+    # delayed plant as well as the same fit tracks the plant without the delay; told
+    # nothing, the fit takes the delay up in its rate terms and tracks worse.
+    zero = [s for s in training_set() if s.name.startswith("train_zero_")]
+    plain = PlantConfig.thesis_rig()
+    delayed = plain.with_effect("transport_delay", delay_s=0.08)
+    trajectories = ("traj_descending_sine", "traj_up_chirp")
+
+    def rmse_deg(model: IDRDPI, config: PlantConfig) -> list[float]:
+        return [math.degrees(tracking_score(model, t, config).metrics.rmse) for t in trajectories]
+
+    fit = {"budget": SMALL, "seed": 0}
+    undelayed = rmse_deg(IDRDPI(**fit).fit(simulate_recordings(zero, plain), progress=False), plain)
+    train = simulate_recordings(zero, delayed)
+    told = IDRDPI(**fit, preview_s=0.08).fit(train, progress=False)
+    assert told.preview_samples == 20
+    with_preview = rmse_deg(told, delayed)
+    without = rmse_deg(IDRDPI(**fit).fit(train, progress=False), delayed)
+    for a, b, c in zip(undelayed, with_preview, without, strict=True):
+        assert b == pytest.approx(a, rel=0.05, abs=0.02), (undelayed, with_preview)
+        assert c > b + 0.1, (with_preview, without)
+    model = told
+    model.save(tmp_path / "m")
+    loaded = load_model(tmp_path / "m")
+    assert isinstance(loaded, IDRDPI) and loaded.preview_samples == 20
+    desired = deg_to_rad(np.linspace(0.0, 20.0, 500))
+    np.testing.assert_array_equal(loaded.predict(desired), model.predict(desired))
+    # predict reads the set-point ahead as the node does: the stream fed 20 samples early.
+    stream = model.stream()
+    ahead = np.concatenate([desired[20:], np.full(20, desired[-1])])
+    np.testing.assert_array_equal([stream.step(float(v)) for v in ahead], model.predict(desired))
+
+
+def test_a_model_saved_before_the_preview_loads_without_one() -> None:
+    # The shipped IDRDPI was saved before preview_s existed (its manifest has no such key).
+    root = Path(__file__).resolve().parents[3]
+    shipped = load_model(root / "src/catheter_control/catheter_control/data/idrdpi")
+    assert isinstance(shipped, IDRDPI)
+    assert shipped.preview_s == 0.0 and shipped.preview_samples == 0
+
+
 def test_pressure_is_finite_for_any_finite_desired_angle() -> None:
     model = IDRDPI.from_params(KNOWN)
     wild = deg_to_rad(np.array([0.0, 1e4, -1e4, 0.0, 1e-9, 35.0, 1e6]))
@@ -148,3 +194,5 @@ def test_settings_are_checked() -> None:
         IDRDPI(method="genetic")  # type: ignore[arg-type]
     with pytest.raises(ParameterError, match="virtual_samples"):
         IDRDPI(method="gpi", virtual_samples=10)
+    with pytest.raises(ParameterError, match=r"preview_s = 2.0 must be in \[0, 0.5\] s"):
+        IDRDPI(preview_s=2.0)
