@@ -625,6 +625,10 @@ def compensator_choice(args: argparse.Namespace) -> dict[str, object]:
         FeedbackGains.load(args.feedback_gains)
         params["feedback_gains"] = str(args.feedback_gains)
     if args.feedforward_shaping is not None:
+        from catheter_control.models import shaper_for
+
+        # Checked here too: a loop with no tip to shape stops bringup before any node starts.
+        shaper_for(args.feedforward_shaping, args.feedback_gains, args.model_dir)
         params["feedforward_shaping"] = args.feedforward_shaping
     return params
 

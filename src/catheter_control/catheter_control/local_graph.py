@@ -28,6 +28,7 @@ from catheter_control.models import (
     resolve_compensator,
     resolve_feedback,
     resolve_shaping,
+    shaper_for,
 )
 from catheter_models.errors import CatheterError, GraphConflictError
 from catheter_models.geometry import Calibration
@@ -74,6 +75,8 @@ def prepare_local_graph(args: argparse.Namespace) -> None:
     # A commissioned model directory runs with the feedback it was verified with.
     args.feedback = resolve_feedback(args.feedback, args.model_dir)
     args.feedforward_shaping = resolve_shaping(args.feedforward_shaping, args.model_dir)
+    # The node would refuse it at configure, after the graph is up: refuse it now.
+    shaper_for(args.feedforward_shaping, args.feedback_gains, args.model_dir)
     choose_domain(default_domain_choice(args.domain_id), args.namespace, "follow_trajectory")
 
 

@@ -250,15 +250,13 @@ def gains_file(gains_path: str, model_dir: str) -> Path:
     return shipped_model_dir(SHIPPED_GAINS) / GAINS_FILE
 
 
-def load_shaping(
-    kind: str, compensator: StreamingCompensator, gains_path: str, model_dir: str
-) -> StreamingCompensator:
-    """``compensator`` with the feedforward shaping ``kind`` around it (``none``: as it is).
+def shaper_for(kind: str, gains_path: str, model_dir: str) -> InputShaper | None:
+    """The input shaper ``kind`` asks for (None for ``none``), designed on the tuned loop.
 
     The tip's mode comes from the loop that ``catheter-lab tune`` identified, recorded in the
     sealed ``feedback.json`` in force (as :func:`load_feedback` finds it), so the shaper and
     the feedback are designed on the same identified loop and an edited mode is refused by
-    the seal.
+    the seal. Launchers call it before anything starts; the node at configure.
 
     Raises:
         ParameterError: unknown kind, a gains file that is missing or malformed, or a loop
@@ -270,12 +268,21 @@ def load_shaping(
             f"unknown feedforward shaping {kind!r}; available: {', '.join(SHAPERS)}"
         )
     if kind == "none":
-        return compensator
+        return None
     path = gains_file(gains_path, model_dir)
-    gains = FeedbackGains.load(path)
-    shaper = InputShaper.of_loop(kind, gains.tuning.get("loop", {}), str(path))
-    assert shaper is not None  # kind is not none
-    return ShapedCompensator(compensator, shaper)
+    return InputShaper.of_loop(kind, FeedbackGains.load(path).tuning.get("loop", {}), str(path))
+
+
+def load_shaping(
+    kind: str, compensator: StreamingCompensator, gains_path: str, model_dir: str
+) -> StreamingCompensator:
+    """``compensator`` with the feedforward shaping ``kind`` around it (``none``: as it is).
+
+    Raises:
+        ParameterError, FeedbackFileError: as :func:`shaper_for`.
+    """
+    shaper = shaper_for(kind, gains_path, model_dir)
+    return compensator if shaper is None else ShapedCompensator(compensator, shaper)
 
 
 def load_feedback(kind: str, gains_path: str, model_dir: str, rate_hz: float) -> PIDFeedback | None:
