@@ -108,27 +108,36 @@ def _commissioned(model_dir: str, key: str) -> object | None:
     return record.get(key)
 
 
+def _resolve_choice(
+    kind: str | None, model_dir: str, key: str, choices: tuple[str, ...], what: str
+) -> str:
+    """``kind`` if given, else ``commissioned.json``'s ``key``, else ``none``.
+
+    Raises:
+        ParameterError: ``kind`` or the record's choice is not one of ``choices``.
+    """
+    if kind is not None:
+        if kind not in choices:
+            raise ParameterError(f"unknown {what} {kind!r}; available: {', '.join(choices)}")
+        return kind
+    held = _commissioned(model_dir, key)
+    if held is None:
+        return "none"
+    if held not in choices:
+        raise ParameterError(
+            f"{Path(model_dir) / COMMISSIONED_FILE} names {what} {held!r}; "
+            f"available: {', '.join(choices)}"
+        )
+    return str(held)
+
+
 def resolve_shaping(kind: str | None, model_dir: str) -> str:
     """The feedforward shaping to run: ``kind`` if given, else what ``commission`` chose.
 
     Raises:
         ParameterError: unknown ``kind``, or a ``commissioned.json`` naming an unknown one.
     """
-    if kind is not None:
-        if kind not in SHAPERS:
-            raise ParameterError(
-                f"unknown feedforward shaping {kind!r}; available: {', '.join(SHAPERS)}"
-            )
-        return kind
-    held = _commissioned(model_dir, "feedforward_shaping")
-    if held is None:
-        return "none"
-    if held not in SHAPERS:
-        raise ParameterError(
-            f"{Path(model_dir) / COMMISSIONED_FILE} names feedforward shaping {held!r}; "
-            f"available: {', '.join(SHAPERS)}"
-        )
-    return str(held)
+    return _resolve_choice(kind, model_dir, "feedforward_shaping", SHAPERS, "feedforward shaping")
 
 
 def resolve_feedback(kind: str | None, model_dir: str) -> str:
@@ -141,19 +150,7 @@ def resolve_feedback(kind: str | None, model_dir: str) -> str:
     Raises:
         ParameterError: unknown ``kind``, or a ``commissioned.json`` that is not one.
     """
-    if kind is not None:
-        if kind not in FEEDBACKS:
-            raise ParameterError(f"unknown feedback {kind!r}; available: {', '.join(FEEDBACKS)}")
-        return kind
-    held = _commissioned(model_dir, "feedback")
-    if held is None:
-        return "none"
-    if held not in FEEDBACKS:
-        raise ParameterError(
-            f"{Path(model_dir) / COMMISSIONED_FILE} names feedback {held!r}; "
-            f"available: {', '.join(FEEDBACKS)}"
-        )
-    return str(held)
+    return _resolve_choice(kind, model_dir, "feedback", FEEDBACKS, "feedback")
 
 
 def shipped_model_dir(name: str = "static_map") -> Path:
