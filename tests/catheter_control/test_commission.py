@@ -197,3 +197,17 @@ def test_a_commissioned_model_directory_runs_with_the_feedback_it_was_verified_w
     (job.out_dir / cm.MODEL_DIR / cm.COMMISSIONED_FILE).write_text('{"feedback": "pid"}')
     with pytest.raises(ParameterError, match="names feedback 'pid'"):
         resolve_feedback(None, model)
+
+
+def test_the_idrdpi_is_told_the_tuned_dead_time_in_whole_samples(tmp_path: Path) -> None:
+    job = _job(tmp_path)
+    job.tune_dir.mkdir(parents=True)
+    gains = job.tune_dir / "feedback.json"
+    # What tune found on the Bouc-Wen plant with 40 ms of transport delay: 8.4 samples.
+    gains.write_text(
+        json.dumps({"tuning": {"loop": {"delay_s": 0.0327, "time_constant_s": 0.001}}})
+    )
+    assert job.dead_time_s() == pytest.approx(0.032)
+    # ... and on our plant (both at the fit's lower bounds): none.
+    gains.write_text(json.dumps({"tuning": {"loop": {"delay_s": 1e-4, "time_constant_s": 1e-3}}}))
+    assert job.dead_time_s() == 0.0
