@@ -65,7 +65,7 @@ from catheter_control.trajectory import (
     with_lead_in,
 )
 from catheter_models.bag.space import DiskSpaceError, check_free_space
-from catheter_models.contract import CONTROL_RATE_HZ, DEFAULT_NAMESPACE
+from catheter_models.contract import CONTROL_RATE_HZ, DEFAULT_NAMESPACE, SENSOR_RATE_HZ
 from catheter_models.errors import CatheterError
 from catheter_models.lab.signals import lab_training_specs
 from catheter_models.signals import TEST_TRAJECTORIES
@@ -506,6 +506,10 @@ class Commission:
                 # One recording of training data: hold out its tail, not a whole recording.
                 "--set",
                 'validation_split="time"',
+                # A causal network cannot undo a dead time; read ahead, as the IDRDPI does
+                # (in samples of the rate it is trained at, train's default).
+                "--set",
+                f"preview_samples={round(self.dead_time_s() * SENSOR_RATE_HZ)}",
                 "--quiet",
                 "-o",
                 str(out),
