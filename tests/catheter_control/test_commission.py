@@ -211,3 +211,24 @@ def test_the_idrdpi_is_told_the_tuned_dead_time_in_whole_samples(tmp_path: Path)
     # ... and on our plant (both at the fit's lower bounds): none.
     gains.write_text(json.dumps({"tuning": {"loop": {"delay_s": 1e-4, "time_constant_s": 1e-3}}}))
     assert job.dead_time_s() == 0.0
+
+
+def test_the_dead_time_comes_from_the_explained_chain_where_the_lab_found_one(
+    tmp_path: Path,
+) -> None:
+    import shutil
+
+    from foreign_plants import SUPPORT_DIR
+
+    job = _job(tmp_path)
+    job.tune_dir.mkdir(parents=True)
+    (job.tune_dir / "feedback.json").write_text(
+        json.dumps({"tuning": {"loop": {"delay_s": 0.030, "time_constant_s": 0.001}}})
+    )
+    assert job.dead_time() == (pytest.approx(0.032), "the tuned loop")
+    # The chain the lab explained on the Bouc-Wen plant with 40 ms of delay behind an 8 ms
+    # valve (commission's step 2 there): transport_delay 50.6 ms, 13 samples at 250 Hz.
+    explained = job.out_dir / "forward" / "explain"
+    shutil.copytree(SUPPORT_DIR / "foreign_plants" / "boucwen_delay_chain", explained / "step2")
+    assert job.chain_dead_time_s() == pytest.approx(0.0506, abs=1e-4)
+    assert job.dead_time() == (pytest.approx(0.052), "the lab's explained chain")
