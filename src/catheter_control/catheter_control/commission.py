@@ -495,6 +495,11 @@ class Commission:
             if chain is not None
             else (self.tuned_dead_time_s(), "the tuned loop")
         )
+        from catheter_models.models.idrdpi import MAX_PREVIEW_S
+
+        if seconds > MAX_PREVIEW_S:
+            # A loop this slow is not a dead time to read ahead: the IDRDPI would refuse it.
+            seconds, source = MAX_PREVIEW_S, f"{source}, {seconds:.2f} s cut to MAX_PREVIEW_S"
         return round(seconds * self.control_rate_hz) / self.control_rate_hz, source
 
     def dead_time_s(self) -> float:
