@@ -43,7 +43,6 @@ import time
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from rclpy.qos import qos_profile_sensor_data
 from rclpy.serialization import deserialize_message
-from rclpy.subscription import MessageInfo, Subscription
 from sensor_msgs.msg import FluidPressure, JointState
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
@@ -63,13 +62,13 @@ from catheter_control.models import (
 )
 from catheter_control.trajectory import TrajectoryLimits, TrajectoryPlan
 from catheter_control.trajectory_action import RunProgress, TrajectoryActionServer
+from catheter_control.trajectory_intake import IntakeError, TrajectoryIntake, oversize_refusal
 from catheter_models.contract import (
     ANGLE_DESIRED,
     BEND_JOINT,
     CONTROL_RATE_HZ,
     MAX_PRESSURE_PA,
     MAX_SLEW_PA_PER_S,
-    MAX_TRAJECTORY_MESSAGE_BYTES,
     PRESSURE_COMMAND,
     PRESSURE_LIMIT_HARD_PA,
     PRESSURE_MEASURED,
@@ -218,7 +217,8 @@ class CompensatorNode(LifecycleLoopNode):
         # The WARN stands until a trajectory starts: a refusal is news until the next run.
         self._refusal_standing = False
         self._accepted = 0
-        self._trajectory_sub: Subscription[JointTrajectory] | None = None
+        self._intake: TrajectoryIntake | None = None
+        self._intake_lost = ""
         self._action: TrajectoryActionServer | None = None
         # A plan dropped before it started, and why: the action reports it to its goal.
         self._dropped: tuple[TrajectoryPlan, str] | None = None
@@ -283,11 +283,22 @@ class CompensatorNode(LifecycleLoopNode):
         if self.accept_trajectories:
             # Subscribed from configure, not activate: a trajectory latched (transient local)
             # while the node was not armed is refused once here, never run on activation.
-            # raw: the message's length is checked before rclpy deserialises it (see
-            # _on_trajectory).
-            self._trajectory_sub = self.create_subscription(
-                JointTrajectory, TRAJECTORY.name, self._on_trajectory, qos.TRAJECTORY, raw=True
-            )
+            # In a process of its own, which refuses an oversized message by its length, so
+            # that taking it never holds this process's GIL (see trajectory_intake).
+            with self._lock:
+                self._intake_lost = ""
+            try:
+                self._intake = TrajectoryIntake(
+                    self,
+                    self.resolve_topic_name(TRAJECTORY.name),
+                    self._on_trajectory,
+                    self._refuse,
+                    self._on_intake_lost,
+                )
+            except IntakeError as exc:
+                self.fail_transition("configure", str(exc))
+                self._release()
+                return TransitionCallbackReturn.FAILURE
             self._action = TrajectoryActionServer(self, self, stamp_ns=self.stamp_ns)
         else:
             self.get_logger().warning(
@@ -387,9 +398,9 @@ class CompensatorNode(LifecycleLoopNode):
 
     def _release(self) -> None:
         self.stop_loop()
-        if self._trajectory_sub is not None:
-            self.destroy_subscription(self._trajectory_sub)
-            self._trajectory_sub = None
+        if self._intake is not None:
+            self._intake.close()
+            self._intake = None
         if self._action is not None:
             self._action.destroy()
             self._action = None
@@ -478,23 +489,31 @@ class CompensatorNode(LifecycleLoopNode):
         """Whether ``plan`` starts at the held bend (see :meth:`_same_place_rad`)."""
         return abs(float(plan.angle_rad[0]) - held_rad) <= self._same_place_rad() + 1e-12
 
-    def _on_trajectory(self, data: bytes, info: MessageInfo) -> None:
-        """A ``trajectory`` message, taken serialised: too big is refused undeserialised.
+    def _on_intake_lost(self, reason: str) -> None:
+        """The intake process stopped on its own: no trajectory can arrive on the topic now."""
+        with self._lock:
+            self._intake_lost = reason
+        self.get_logger().error(
+            f"{reason}: trajectories on the topic are no longer taken (the action still is); "
+            "cleanup and configure the node to start it again"
+        )
+        self._publish_diagnostics()
+
+    def _on_trajectory(self, data: bytes, publisher_gid: bytes = b"") -> None:
+        """A ``trajectory`` message, serialised, from the intake process.
 
         Runs on the executor's thread, never the control loop's; what they share is the GIL,
         which rclpy's deserialisation holds while it builds a Python object per point (13 s
         for a 10^6-point message on the test machine, during which the loop missed hundreds of
-        deadlines). Its length bounds that work, so it is checked first: copying the bytes
-        out is one memcpy.
+        deadlines). The intake process refused anything over the byte limit; the length is
+        checked again here because this layer deserialises, and must not trust a pipe to
+        have bounded that work.
         """
-        if self._action is not None and self._action.is_echo(info):
+        if self._action is not None and self._action.is_echo(publisher_gid):
             return  # an action goal's trajectory, republished for the record: already running
-        if len(data) > MAX_TRAJECTORY_MESSAGE_BYTES:
-            self._refuse(
-                f"the message is {len(data)} bytes, over the limit of "
-                f"{MAX_TRAJECTORY_MESSAGE_BYTES} (MAX_TRAJECTORY_MESSAGE_BYTES, about "
-                f"{self.limits.max_points} points); not deserialised"
-            )
+        refusal = oversize_refusal(len(data))
+        if refusal:
+            self._refuse(refusal)
             return
         try:
             msg = deserialize_message(data, JointTrajectory)
@@ -633,6 +652,8 @@ class CompensatorNode(LifecycleLoopNode):
             refusals, last, accepted = self._refusals, self._last_refusal, self._accepted
             standing = self._refusal_standing
             core = self.core
+            intake_lost = self._intake_lost
+        intake = self._intake
         setup: dict[str, object] = {}
         timing: dict[str, object] = {}
         if core is None or loop is None:
@@ -666,6 +687,8 @@ class CompensatorNode(LifecycleLoopNode):
                     diagnostics.ERROR,
                     f"compensator failed ({model_error or 'non-finite pressure'}); ramped down",
                 )
+            elif intake_lost:
+                level, message = diagnostics.ERROR, intake_lost
             elif standing:
                 level, message = diagnostics.WARN, f"trajectory refused: {last}"
             elif hold_rad is not None:
@@ -686,6 +709,8 @@ class CompensatorNode(LifecycleLoopNode):
                 "hold_timeout_s": f"{self.hold_timeout_s:g}",
                 "accept_trajectories": str(self.accept_trajectories).lower(),
                 "trajectories_accepted": accepted,
+                "trajectory_intake_pid": "" if intake is None else intake.pid,
+                "trajectory_intake_lost": intake_lost,
             }
             timing = {
                 "realtime": loop.realtime,

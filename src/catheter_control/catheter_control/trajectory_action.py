@@ -62,7 +62,6 @@ from control_msgs.msg import JointTolerance
 from rclpy.action.server import ActionServer, CancelResponse, GoalResponse, ServerGoalHandle
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.subscription import MessageInfo
 from rclpy.task import Future
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
@@ -255,10 +254,9 @@ class TrajectoryActionServer:
             return None
         return self._tip[1]
 
-    def is_echo(self, info: MessageInfo) -> bool:
+    def is_echo(self, publisher_gid: bytes) -> bool:
         """Whether a ``trajectory`` message came from this server's own echo publisher."""
-        gid = info.get("publisher_gid")
-        if not gid:
+        if not publisher_gid:
             return False
         ours = [
             bytes(pub.endpoint_gid)
@@ -266,7 +264,7 @@ class TrajectoryActionServer:
             if pub.node_name == self._node.get_name()
             and pub.node_namespace == self._node.get_namespace()
         ]
-        return bytes(gid["data"]) in ours
+        return publisher_gid in ours
 
     def _on_cancel(self, goal_handle: _Handle) -> CancelResponse:
         for goal in self._goals:
