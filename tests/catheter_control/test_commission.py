@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import json
 from pathlib import Path
 
@@ -9,7 +11,9 @@ import pytest
 
 from catheter_control import commission as cm
 from catheter_control.commission_rig import ResponseCheck, RigChoice, signal_duration_s
+from catheter_control.models import shipped_model_dir
 from catheter_models.errors import CatheterError
+from catheter_models.feedback import GAINS_FILE, FeedbackGains
 from catheter_models.signals import TEST_TRAJECTORIES
 
 
@@ -68,10 +72,19 @@ def test_a_directory_made_on_another_plant_is_refused(tmp_path: Path) -> None:
         _job(tmp_path, plant="my_lab.rod:make_plant")
 
 
+def _tuned(job: cm.Commission, **loop: float) -> Path:
+    """A sealed feedback.json in the job's tune directory, as ``catheter-lab tune`` writes it:
+    the shipped gains, with ``loop`` in place of what their tuning identified."""
+    shipped = FeedbackGains.load(shipped_model_dir("feedback") / GAINS_FILE)
+    tuning = copy.deepcopy(shipped.tuning)
+    tuning["loop"].update(loop)
+    job.tune_dir.mkdir(parents=True, exist_ok=True)
+    return dataclasses.replace(shipped, tuning=tuning).save(job.tune_dir)
+
+
 def _fake_runs(job: cm.Commission, rmse: dict[str, list[float]]) -> None:
     """Candidates' model dirs, the tuned gains and their runs' scores, as if followed."""
-    job.tune_dir.mkdir(parents=True)
-    (job.tune_dir / "feedback.json").write_text('{"kp": 1}\n')
+    _tuned(job, resonance_hz=0.0)
     for kind, values in rmse.items():
         d = job.candidate_dir(kind)
         d.mkdir(parents=True)
@@ -91,7 +104,7 @@ def test_the_candidate_whose_worst_trajectory_is_best_is_written_with_its_gains(
     assert job._select() == 0
     model = job.out_dir / cm.MODEL_DIR
     assert json.loads((model / "manifest.json").read_text())["kind"] == "idrdpi"
-    assert (model / "feedback.json").read_text() == '{"kp": 1}\n'
+    assert (model / "feedback.json").read_bytes() == (job.tune_dir / "feedback.json").read_bytes()
     commissioned = json.loads((model / cm.COMMISSIONED_FILE).read_text())
     assert commissioned["compensator"] == "idrdpi"
     assert commissioned["feedback"] == "pi"
@@ -201,16 +214,24 @@ def test_a_commissioned_model_directory_runs_with_the_feedback_it_was_verified_w
 
 def test_the_idrdpi_is_told_the_tuned_dead_time_in_whole_samples(tmp_path: Path) -> None:
     job = _job(tmp_path)
-    job.tune_dir.mkdir(parents=True)
-    gains = job.tune_dir / "feedback.json"
     # What tune found on the Bouc-Wen plant with 40 ms of transport delay: 8.4 samples.
-    gains.write_text(
-        json.dumps({"tuning": {"loop": {"delay_s": 0.0327, "time_constant_s": 0.001}}})
-    )
+    _tuned(job, delay_s=0.0327, time_constant_s=0.001)
     assert job.dead_time_s() == pytest.approx(0.032)
     # ... and on our plant (both at the fit's lower bounds): none.
-    gains.write_text(json.dumps({"tuning": {"loop": {"delay_s": 1e-4, "time_constant_s": 1e-3}}}))
+    _tuned(job, delay_s=1e-4, time_constant_s=1e-3)
     assert job.dead_time_s() == 0.0
+
+
+def test_a_tuned_loop_whose_seal_does_not_match_is_refused_not_read(tmp_path: Path) -> None:
+    job = _job(tmp_path)
+    path = _tuned(job, delay_s=0.0327, time_constant_s=0.001)
+    raw = json.loads(path.read_text())
+    raw["tuning"]["loop"]["delay_s"] = 0.3  # edited by hand, the seal left as it was
+    path.write_text(json.dumps(raw))
+    with pytest.raises(CatheterError, match=r"feedback\.json.*seal"):
+        job.dead_time()
+    with pytest.raises(CatheterError, match=r"feedback\.json.*seal"):
+        job.candidates()
 
 
 def test_the_dead_time_comes_from_the_explained_chain_where_the_lab_found_one(
@@ -221,10 +242,7 @@ def test_the_dead_time_comes_from_the_explained_chain_where_the_lab_found_one(
     from foreign_plants import SUPPORT_DIR
 
     job = _job(tmp_path)
-    job.tune_dir.mkdir(parents=True)
-    (job.tune_dir / "feedback.json").write_text(
-        json.dumps({"tuning": {"loop": {"delay_s": 0.030, "time_constant_s": 0.001}}})
-    )
+    _tuned(job, delay_s=0.030, time_constant_s=0.001)
     assert job.dead_time() == (pytest.approx(0.032), "the tuned loop")
     # The chain the lab explained on the Bouc-Wen plant with 40 ms of delay behind an 8 ms
     # valve (commission's step 2 there): transport_delay 50.6 ms, 13 samples at 250 Hz.

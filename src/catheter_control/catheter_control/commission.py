@@ -67,6 +67,7 @@ from catheter_control.trajectory import (
 from catheter_models.bag.space import DiskSpaceError, check_free_space
 from catheter_models.contract import CONTROL_RATE_HZ, DEFAULT_NAMESPACE, SENSOR_RATE_HZ
 from catheter_models.errors import CatheterError
+from catheter_models.feedback import FeedbackGains
 from catheter_models.lab.signals import lab_training_specs
 from catheter_models.signals import TEST_TRAJECTORIES
 
@@ -237,6 +238,9 @@ class Commission:
     state: State = field(init=False)
     rig: CommissionRig = field(init=False)
     _rig_up: bool = field(default=False, init=False)
+    _chain_dead_times: dict[tuple[Path, int], float | None] = field(
+        default_factory=dict, init=False, repr=False
+    )
 
     def __post_init__(self) -> None:
         self.out_dir.mkdir(parents=True, exist_ok=True)
@@ -258,13 +262,20 @@ class Commission:
         """A compensator's model directory."""
         return self.out_dir / "candidates" / kind
 
-    def tip_mode_hz(self) -> float:
-        """The ringing tip the tuned loop has [Hz] (0: none found, or not tuned yet)."""
+    def tuned_loop(self) -> dict[str, Any]:
+        """The loop ``catheter-lab tune`` identified ({} before tuning).
+
+        Read through :meth:`FeedbackGains.load`, as the compensator node reads it, so a file
+        whose seal does not match is refused here too, by name, not used.
+        """
         path = self.tune_dir / "feedback.json"
         if not path.exists():
-            return 0.0
-        loop = json.loads(path.read_text()).get("tuning", {}).get("loop", {})
-        return float(loop.get("resonance_hz", 0.0) or 0.0)
+            return {}
+        return dict(FeedbackGains.load(path).tuning.get("loop", {}))
+
+    def tip_mode_hz(self) -> float:
+        """The ringing tip the tuned loop has [Hz] (0: none found, or not tuned yet)."""
+        return float(self.tuned_loop().get("resonance_hz", 0.0) or 0.0)
 
     def candidates(self) -> list[Candidate]:
         """The compensators fitted so far, each with the tuned PI.
@@ -453,10 +464,7 @@ class Commission:
         A first-order lag is, to first order, a dead time of its time constant, so the two
         are read ahead together.
         """
-        path = self.tune_dir / "feedback.json"
-        if not path.exists():
-            return 0.0
-        loop = json.loads(path.read_text()).get("tuning", {}).get("loop", {})
+        loop = self.tuned_loop()
         return float(loop.get("delay_s", 0.0)) + float(loop.get("time_constant_s", 0.0))
 
     def chain_dead_time_s(self) -> float | None:
@@ -471,14 +479,20 @@ class Commission:
         ]
         if not steps:
             return None
-        from catheter_models.models import load_model
+        final = max(steps, key=lambda p: int(p.name[4:]))
+        # Asked by the IDRDPI's step and the c-LSTM's: the model is loaded (and its hash
+        # checked) once per version of the explained chain.
+        key = (final, (final / "manifest.json").stat().st_mtime_ns)
+        if key not in self._chain_dead_times:
+            from catheter_models.models import load_model
 
-        final = load_model(max(steps, key=lambda p: int(p.name[4:])))
-        values: dict[str, dict[str, float]] = (
-            final.block_values() if hasattr(final, "block_values") else {}
-        )
-        found = [values[e][name] for e, name in CHAIN_DEAD_TIME.items() if e in values]
-        return float(sum(found)) if found else None
+            model = load_model(final)
+            values: dict[str, dict[str, float]] = (
+                model.block_values() if hasattr(model, "block_values") else {}
+            )
+            found = [values[e][name] for e, name in CHAIN_DEAD_TIME.items() if e in values]
+            self._chain_dead_times[key] = float(sum(found)) if found else None
+        return self._chain_dead_times[key]
 
     def dead_time(self) -> tuple[float, str]:
         """The dead time the compensators read ahead [s], whole control samples, and its source.
