@@ -412,3 +412,32 @@ def check_finite_step(value: float, kind: str) -> float:
     if not math.isfinite(v):
         raise SignalError(f"{kind} stream: input sample {v!r} is not finite")
     return v
+
+
+# -- a preview: the plan read ahead across the loop's dead time ----------------------------------
+# One definition for every compensator that reads ahead (the c-LSTM, the IDRDPI), so training
+# pairs, ``predict`` and the node's feed (``evaluate.track``, the compensator node) agree.
+
+
+def paired_ahead(
+    inputs: FloatArray, outputs: FloatArray, lead: int
+) -> tuple[FloatArray, FloatArray]:
+    """Training pairs for a compensator with a preview: ``inputs[k + lead]`` with ``outputs[k]``.
+
+    An inverse model so trained maps the bend wanted ``lead`` samples from now to the pressure
+    to command now, which is what a loop with that dead time needs.
+    """
+    if lead <= 0:
+        return inputs, outputs
+    return inputs[lead:], outputs[: outputs.size - lead]
+
+
+def read_ahead(signal: FloatArray, lead: int) -> FloatArray:
+    """``signal`` read ``lead`` samples ahead, its last value held past its end.
+
+    What a compensator with a preview is fed over a whole signal, as the node feeds it the
+    set-point ``lead`` ticks ahead of the plan's clock, holding the plan's last point.
+    """
+    if lead <= 0 or signal.size == 0:
+        return signal
+    return np.concatenate([signal[lead:], np.full(min(lead, signal.size), signal[-1])])

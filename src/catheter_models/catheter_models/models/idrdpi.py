@@ -70,6 +70,8 @@ from catheter_models.models.base import (
     NotFittedError,
     Recording,
     as_input,
+    paired_ahead,
+    read_ahead,
     saved_rate_hz,
 )
 from catheter_models.models.drdpi import (
@@ -154,11 +156,12 @@ def _led(recording: Recording, lead: int) -> Recording:
             f"recording {recording.name!r} has {recording.pressure_pa.size} samples, too few "
             f"for a preview of {lead}"
         )
+    angle_rad, pressure_pa = paired_ahead(recording.angle_rad, recording.pressure_pa, lead)
     return Recording(
         name=recording.name,
         rate_hz=recording.rate_hz,
-        pressure_pa=recording.pressure_pa[: recording.pressure_pa.size - lead],
-        angle_rad=recording.angle_rad[lead:],
+        pressure_pa=pressure_pa,
+        angle_rad=angle_rad,
         source=recording.source,
         sha256=recording.sha256,
         measurement_age_s=recording.measurement_age_s,
@@ -559,11 +562,7 @@ class IDRDPI(Model):
     def predict(self, input_si: npt.ArrayLike) -> FloatArray:
         """Pressure [Pa gauge] for a desired-angle signal [rad], from rest (not clamped)."""
         coef = self._coef()
-        x = rad_to_deg(as_input(input_si, "angle_rad"))
-        lead = self.preview_samples
-        if lead and x.size:
-            # As the node feeds it: the set-point ``lead`` samples ahead, the last one held.
-            x = np.concatenate([x[lead:], np.full(min(lead, x.size), x[-1])])
+        x = read_ahead(rad_to_deg(as_input(input_si, "angle_rad")), self.preview_samples)
         out: FloatArray = bar_to_pa(run_chain(coef, x))
         return out
 

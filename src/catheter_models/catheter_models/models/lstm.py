@@ -60,6 +60,7 @@ from catheter_models.models.base import (
     Stream,
     as_input,
     check_finite_step,
+    read_ahead,
 )
 from catheter_models.models.lstm_graph import (
     FORMS,
@@ -366,9 +367,7 @@ class _LSTMBase(Model):
         session, spec = self._fitted()
         if x.size == 0:
             return np.zeros(0)
-        lead = spec.preview_samples
-        if lead:
-            x = np.concatenate([x[lead:], np.full(min(lead, x.size), x[-1])])
+        x = read_ahead(x, spec.preview_samples)
         x_norm = spec.input_scaler.transform(x).astype(np.float32)
         if spec.form == "streaming":
             h0, c0 = rest_state(session, spec)

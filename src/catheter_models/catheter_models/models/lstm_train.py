@@ -51,6 +51,7 @@ from catheter_models.models.base import (
     InsufficientDataError,
     MinMaxScaler,
     Recording,
+    paired_ahead,
 )
 from catheter_models.models.lstm_graph import (
     INPUT_NAME,
@@ -207,9 +208,7 @@ def _sequence(
         # Forward and backward: no phase shift, so the smoothed input does not lag.
         sos = butter(2, smoothing_hz, fs=rec.rate_hz, output="sos")
         x = np.asarray(sosfiltfilt(sos, x), dtype=np.float64)
-    if preview:
-        # The input leads: angle[k + L] is paired with pressure[k].
-        x, y = x[preview:], y[:-preview]
+    x, y = paired_ahead(x, y, preview)  # the input leads: angle[k + L] with pressure[k]
     return _Sequence(rec.name, x, y)
 
 
