@@ -331,13 +331,38 @@ def _cmd_models(_args: argparse.Namespace) -> int:
 
 
 def _cmd_effects(_args: argparse.Namespace) -> int:
+    """Each effect as the simulated plant has it and as the lab identifies it.
+
+    Read from the two catalogues (the plant's ``EFFECTS`` and the lab's blocks, which name
+    their plant counterpart), so what ``effects`` offers is what ``add`` takes.
+    """
+    from catheter_models.lab.blocks import BLOCKS, CHECKS, DEFAULT_CHAIN_EFFECTS
+    from catheter_models.lab.residuals import TEST_LABELS
     from catheter_models.plant.config import EFFECTS
 
+    lab_of = {b.plant_effect: b for b in BLOCKS.values() if b.plant_effect}
     for name, spec in EFFECTS.items():
         state = "on" if spec.enabled_in_thesis_rig else "off"
         print(f"{name}  (thesis rig: {state})\n    {spec.physics}")
         for p in spec.params:
             print(f"    {p.name} = {p.default:g}  in [{p.low:g}, {p.high:g}]  {p.doc}")
+        block = lab_of.get(name)
+        if name in DEFAULT_CHAIN_EFFECTS:
+            print("    lab: part of the hysteresis core (the DRDPI carries it)")
+        elif block is not None:
+            print(
+                f"    lab: block {block.effect!r} ({block.side} side; catheter-lab add "
+                f"{block.effect}); evidence: {TEST_LABELS[block.evidence_test]}; "
+                f"shows in: {', '.join(block.regimes)}"
+            )
+        else:
+            print("    lab: no block (the lab cannot name it)")
+    for block in CHECKS.values():
+        print(
+            f"{block.effect}  (lab only: a side check, never named by a diagnosis)\n"
+            f"    {block.stands_for}\n    lab: block {block.effect!r} ({block.side} side; "
+            f"catheter-lab add {block.effect})"
+        )
     return 0
 
 

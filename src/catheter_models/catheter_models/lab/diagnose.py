@@ -70,28 +70,13 @@ NEAR_REFERENCE: Final = 1.1
 """A model far above the noise but within this multiple of the black-box reference's error is
 still unexplained; the verdict adds that no black box learns the rest from these data."""
 
-EVIDENCE_TEST: Final = {
-    "pneumatic_lag": "rate_cross",
-    "transport_delay": "input_cross",
-    "creep": "autocorrelation",
-    "tip_dynamics": "abs_rate_e",
-    "drift": "time_trend",
-}
-"""The residual test whose signature each effect leaves (docs/lab.md, 'where it shows')."""
+EVIDENCE_TEST: Final = {e: b.evidence_test for e, b in BLOCKS.items()}
+"""The residual test whose signature each effect leaves, as each block says
+(:attr:`Block.evidence_test`)."""
 
-EFFECT_REGIMES: Final = {
-    "pneumatic_lag": ("fast_motion", "loading", "unloading"),
-    "transport_delay": ("fast_motion", "loading", "unloading"),
-    "creep": ("plateau",),
-    "tip_dynamics": ("fast_motion", "peak", "valley"),
-    "drift": ("vented",),
-}
-"""The regimes where each effect shows: an effect must help there to earn its place.
-
-Drift is judged with the muscle vented: an offset drift (thermal, a sensor mount) shows at
-rest as much as anywhere, while a change of gain, which a drift block also half fits, cannot
-show where nothing bends. On the foreign plants at seed 2 the drift block removed 65 % of
-the vented error with an offset drift hidden and added 10-59 % with a gain drift."""
+EFFECT_REGIMES: Final = {e: b.regimes for e, b in BLOCKS.items()}
+"""The regimes where each effect shows, as each block says (:attr:`Block.regimes`): an effect
+must help there to earn its place."""
 
 VENTED_BAR: Final = 0.3
 """Drive below which the muscle is vented ('vented' regime): below any PAM's opening

@@ -96,7 +96,7 @@ TEST_NAMES: Final = (
 )
 """Names of the tests in :attr:`ResidualReport.tests`, in this order."""
 
-_LABELS: Final = {
+TEST_LABELS: Final = {
     "autocorrelation": "residual autocorrelation",
     "input_cross": "residual vs input",
     "rate_cross": "residual vs input rate",
@@ -106,6 +106,7 @@ _LABELS: Final = {
     "abs_rate_e": "residual vs |input rate|",
     "time_trend": "residual vs time (drift)",
 }
+"""Each test as a person reads it (reports, ``catheter-lab effects``)."""
 
 # Below this fraction of its raw magnitude, a centred signal is rounding error, not variation:
 # a constant residual must give correlations of 0, not normalised noise of order 1.
@@ -507,7 +508,7 @@ def _make_test(
     values.setflags(write=False)
     return CorrelationTest(
         name=name,
-        label=_LABELS[name],
+        label=TEST_LABELS[name],
         lags_s=lags_s,
         values=values,
         band=band,
