@@ -461,17 +461,15 @@ def _greybox_of(model_dir: Path) -> Any:
     """The grey-box model in ``model_dir`` (a DRDPI is the default chain); refused otherwise."""
     from catheter_models.lab.greybox import GreyBox
     from catheter_models.models import load_model
-    from catheter_models.models.drdpi import DRDPI
 
     model = load_model(model_dir)
-    if isinstance(model, DRDPI):
-        model = GreyBox.from_drdpi(model)
-    if not isinstance(model, GreyBox):
+    chain = GreyBox.chain_of(model)
+    if chain is None:
         raise CatheterError(
             f"{model_dir} holds a {model.kind} model: effects and cores are changed on "
             "grey-box models (or a DRDPI, the default chain)"
         )
-    return model
+    return chain
 
 
 def _change(args: argparse.Namespace, change: str, make: Any) -> int:

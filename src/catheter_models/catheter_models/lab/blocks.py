@@ -102,6 +102,13 @@ class Block(ABC):
     """A form outside the catalogue (:data:`CHECKS`) that gives the same signature from the
     core's other side. Where it fits the held-out data clearly better, the effect is not
     where this block puts it, and the diagnosis does not name it ('': no rival)."""
+    scheduled: ClassVar[bool] = False
+    """Its response depends on the signal entering it (the tip's damping follows the bend), so
+    a core linear in its weights and the block are solved in passes, each scheduling the block
+    by the previous weights' output."""
+    ends_are_plain: ClassVar[bool] = False
+    """Either end of a parameter's range is a plain answer (a drift's range is symmetric), so
+    a value there does not say the block stands in for something else."""
     evidence_test: ClassVar[str] = ""
     """The residual test whose signature the effect leaves (a name in
     ``residuals.TEST_NAMES``; docs/lab.md, 'where it shows'). Catalogue blocks must have one."""
@@ -576,6 +583,7 @@ class TipDynamics(Block):
     """
 
     effect = "tip_dynamics"
+    scheduled = True
     evidence_test = "abs_rate_e"
     regimes = ("fast_motion", "peak", "valley")
     plant_effect = "tip_dynamics"
@@ -689,6 +697,7 @@ class Drift(Block):
     """
 
     effect = "drift"
+    ends_are_plain = True
     evidence_test = "time_trend"
     regimes = ("vented",)
     """Judged with the muscle vented: an offset drift (thermal, a sensor mount) shows at rest

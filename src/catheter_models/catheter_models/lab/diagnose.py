@@ -52,7 +52,6 @@ from catheter_models.lab.greybox import GreyBox
 from catheter_models.lab.residuals import ResidualReport, residual_tests
 from catheter_models.metrics import classify_regimes
 from catheter_models.models.base import FloatArray, Model, Recording
-from catheter_models.models.drdpi import DRDPI
 from catheter_models.models.evaluate import pooled_rmse
 from catheter_models.units import pa_to_bar, rad_to_deg
 
@@ -457,11 +456,11 @@ def _changes(
 
 def _pinned(model: GreyBox, effect: str) -> list[str]:
     """Parameters of ``effect``'s block that ended at a bound of their range."""
-    pinned = []
+    pinned: list[str] = []
+    if BLOCKS[effect].ends_are_plain:
+        return pinned
     for p, v in zip(BLOCKS[effect].params, model.blocks_[effect], strict=True):
         span = p.high - p.low
-        if effect == "drift":
-            continue  # a drift's range is symmetric: either end is a plain answer
         if p.low > 0.0 and p.high / p.low > 10.0:
             width = math.log(p.high / p.low)
             at_low = math.log(v / p.low) < 0.01 * width
@@ -677,8 +676,8 @@ def diagnose(
         raise ParameterError("diagnose needs training recordings and held-out test recordings")
     wanted: list[str] = []
     other_cores: list[str] = []
-    if isinstance(model, GreyBox | DRDPI):
-        chain = GreyBox.from_drdpi(model) if isinstance(model, DRDPI) else model
+    chain = GreyBox.chain_of(model)
+    if chain is not None:
         wanted, other_cores = _changes(chain, effects, cores)
     forward = model.direction == "forward"
     fit_reference = reference and forward and reference_deg is None
@@ -694,6 +693,7 @@ def diagnose(
             test,
             wanted,
             other_cores,
+            chain=chain,
             reference=fit_reference,
             reference_deg=reference_deg if reference else None,
             min_reduction=min_reduction,
@@ -709,13 +709,17 @@ def _diagnose(
     wanted: list[str],
     other_cores: list[str],
     *,
+    chain: GreyBox | None,
     reference: bool,
     reference_deg: float | None,
     min_reduction: float,
     progress: bool,
     pool: Executor,
 ) -> Diagnosis:
-    """:func:`diagnose` once its changes are known and its pool chosen."""
+    """:func:`diagnose` once its changes are known and its pool chosen.
+
+    ``chain`` is the model as the chain it edits (:meth:`GreyBox.chain_of`).
+    """
     noise = noise_std_deg(test)
     forward = model.direction == "forward"
     reference_future: Future[float] | None = None
@@ -730,9 +734,7 @@ def _diagnose(
     regimes = _Regimes(test)
     regimes_deg = regimes.table(residual) if forward else {}
     signature = _signature(residual, regimes, report, noise) if forward else []
-    if isinstance(model, DRDPI):
-        model = GreyBox.from_drdpi(model)
-    if not isinstance(model, GreyBox):
+    if chain is None:
         floors = Floors(noise, reference_future.result() if reference_future else math.nan)
         return Diagnosis(
             model_kind=model.kind,
@@ -762,15 +764,15 @@ def _diagnose(
     # Every refit is independent: all go to the pool at once, and are scored here in order.
     fits: dict[str, Future[GreyBox]] = {}
     for c in other_cores:
-        fits[c] = pool.submit(_fit_change, model, f"{CORE_CHANGE}:{c}", train, progress)
+        fits[c] = pool.submit(_fit_change, chain, f"{CORE_CHANGE}:{c}", train, progress)
     for e in wanted:
         if e not in untestable:
-            fits[e] = pool.submit(_fit_change, model, e, train, progress)
+            fits[e] = pool.submit(_fit_change, chain, e, train, progress)
             rival = BLOCKS[e].rival
-            if rival and rival not in model.effects and rival not in fits:
-                fits[rival] = pool.submit(_fit_change, model, rival, train, progress)
+            if rival and rival not in chain.effects and rival not in fits:
+                fits[rival] = pool.submit(_fit_change, chain, rival, train, progress)
     floors = Floors(noise, reference_future.result() if reference_future else math.nan)
-    base_train = _rmse_deg(model, train)
+    base_train = _rmse_deg(chain, train)
 
     def scored(change: str, fitted: GreyBox) -> tuple[float, float, float, float]:
         rmse_train, rmse_test_new = _rmse_deg(fitted, train), _rmse_deg(fitted, test)
@@ -863,8 +865,8 @@ def _diagnose(
         pool=pool,
     )
     return Diagnosis(
-        model_kind=model.kind,
-        chain=list(model.chain),
+        model_kind=chain.kind,
+        chain=list(chain.chain),
         rmse_train_deg=base_train,
         rmse_test_deg=rmse_test,
         candidates=candidates,

@@ -243,6 +243,19 @@ class GreyBox(Model):
         gb._set(core, {}, model.fitted_rate_hz)
         return gb
 
+    @classmethod
+    def chain_of(cls, model: Model) -> GreyBox | None:
+        """``model`` as the chain the lab edits (None for a black box: no chain to edit).
+
+        A grey box as it is, a fitted DRDPI as the DRDPI core with no blocks. The one place
+        a thesis model becomes a chain; the CLI and the diagnosis ask here.
+        """
+        if isinstance(model, GreyBox):
+            return model
+        if isinstance(model, DRDPI):
+            return cls.from_drdpi(model)
+        return None
+
     def _set(self, core: Core, blocks: Mapping[str, Sequence[float]], rate_hz: float) -> None:
         self.core_ = core
         self.blocks_ = {e: [float(v) for v in blocks[e]] for e in self.effects}
@@ -638,7 +651,7 @@ class _LinearFitter(_Fitter):
         if w is not None and self.basis is not None:
             w = self.basis.T @ w
         designs = self._design(blocks, beta)
-        passes = passes if "tip_dynamics" in outputs else 1
+        passes = passes if any(FORMS[e].scheduled for e in outputs) else 1
         for _ in range(passes):
             mats, offsets = [], []
             for a in designs:
