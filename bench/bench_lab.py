@@ -37,11 +37,11 @@ from bench_plant import _machine
 from catheter_models.lab.compare import compare, write_report
 from catheter_models.lab.diagnose import diagnose, plot_diagnosis
 from catheter_models.lab.explain import explain
-from catheter_models.lab.greybox import GreyBox
 from catheter_models.lab.residuals import plot_residual_tests
 from catheter_models.lab.signals import lab_test_specs, lab_training_specs
 from catheter_models.models.data import simulate_recordings
 from catheter_models.models.drdpi import DRDPI
+from catheter_models.models.greybox import GreyBox
 from catheter_models.plant.config import PlantConfig
 
 REPO = Path(__file__).resolve().parents[1]

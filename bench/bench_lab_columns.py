@@ -32,7 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_plant import _machine
 
-from catheter_models.lab.blocks import block
+from catheter_models.models.blocks import block
 
 RATE_HZ = 250.0
 REPEATS = 20

@@ -34,8 +34,8 @@ from foreign_plants.cases import draw_case  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
 from catheter_models.lab.floors import FilterBankReference  # noqa: E402
-from catheter_models.lab.greybox import GreyBox  # noqa: E402
 from catheter_models.models.evaluate import pooled_rmse  # noqa: E402
+from catheter_models.models.greybox import GreyBox  # noqa: E402
 
 CORES: dict[str, dict[str, Any]] = {
     "drdpi": {"core": "drdpi"},

@@ -41,10 +41,10 @@ from bench_plant import _machine  # noqa: E402
 from foreign_plants import PLANTS  # noqa: E402
 from foreign_plants.cases import draw_case  # noqa: E402
 
-from catheter_models.lab import blocks as lab_blocks  # noqa: E402
-from catheter_models.lab.greybox import GreyBox  # noqa: E402
+from catheter_models.models import blocks as lab_blocks  # noqa: E402
 from catheter_models.models.drdpi import DRDPI  # noqa: E402
 from catheter_models.models.evaluate import pooled_rmse  # noqa: E402
+from catheter_models.models.greybox import GreyBox  # noqa: E402
 
 
 def earlier_form(current: type[lab_blocks.Block]) -> type[lab_blocks.Block]:

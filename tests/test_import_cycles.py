@@ -101,3 +101,17 @@ def test_no_module_is_in_an_import_cycle() -> None:
 def test_a_cycle_is_found() -> None:
     graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}, "e": set()}
     assert cycles(graph) == [["a", "b", "c"]]
+
+
+def test_the_models_never_import_the_lab() -> None:
+    """The lab sits above the models: a core, a block or a grey-box chain is a model anyone
+    (the compensator, the tuner) uses without the lab's workflow coming with it."""
+    graph = import_graph(_modules())
+    upward = {
+        (module, named)
+        for module, names in graph.items()
+        if module.startswith("catheter_models.models")
+        for named in names
+        if named.startswith("catheter_models.lab")
+    }
+    assert not upward, sorted(upward)

@@ -2,18 +2,15 @@
 
 from __future__ import annotations
 
-import copy
-import dataclasses
 import json
 from pathlib import Path
 
 import pytest
+from tuned_gains import sealed_gains
 
 from catheter_control import commission as cm
 from catheter_control.commission_rig import ResponseCheck, RigChoice, signal_duration_s
-from catheter_control.models import shipped_model_dir
 from catheter_models.errors import CatheterError
-from catheter_models.feedback import GAINS_FILE, FeedbackGains
 from catheter_models.signals import TEST_TRAJECTORIES
 
 
@@ -73,13 +70,8 @@ def test_a_directory_made_on_another_plant_is_refused(tmp_path: Path) -> None:
 
 
 def _tuned(job: cm.Commission, **loop: float) -> Path:
-    """A sealed feedback.json in the job's tune directory, as ``catheter-lab tune`` writes it:
-    the shipped gains, with ``loop`` in place of what their tuning identified."""
-    shipped = FeedbackGains.load(shipped_model_dir("feedback") / GAINS_FILE)
-    tuning = copy.deepcopy(shipped.tuning)
-    tuning["loop"].update(loop)
-    job.tune_dir.mkdir(parents=True, exist_ok=True)
-    return dataclasses.replace(shipped, tuning=tuning).save(job.tune_dir)
+    """A sealed feedback.json in the job's tune directory, with ``loop`` identified."""
+    return sealed_gains(job.tune_dir, **loop)
 
 
 def _fake_runs(job: cm.Commission, rmse: dict[str, list[float]]) -> None:

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from tuned_gains import sealed_gains
 
 from catheter_control import commission as cm
 from catheter_control.commission_rig import RigChoice
@@ -135,11 +136,9 @@ def test_commission_tries_a_shaped_candidate_on_a_ringing_tip_and_records_its_ch
         control_rate_hz=RATE_HZ,
         show_progress=False,
     )
-    job.tune_dir.mkdir(parents=True)
-    gains = job.tune_dir / "feedback.json"
-    gains.write_text(json.dumps({"tuning": {"loop": {"resonance_hz": 0.0}}}))
+    sealed_gains(job.tune_dir, resonance_hz=0.0)
     assert [c.name for c in job.candidates()] == ["idrdpi+pi"]
-    gains.write_text(json.dumps({"tuning": {"loop": {"resonance_hz": TIP_HZ}}}))
+    sealed_gains(job.tune_dir, resonance_hz=TIP_HZ, resonance_damping=0.05)
     candidates = {c.name: c for c in job.candidates()}
     assert set(candidates) == {"idrdpi+pi", "idrdpi+zvd+pi"}
     assert candidates["idrdpi+zvd+pi"].params(RATE_HZ)["feedforward_shaping"] == "zvd"

@@ -336,8 +336,8 @@ def _cmd_effects(_args: argparse.Namespace) -> int:
     Read from the two catalogues (the plant's ``EFFECTS`` and the lab's blocks, which name
     their plant counterpart), so what ``effects`` offers is what ``add`` takes.
     """
-    from catheter_models.lab.blocks import BLOCKS, CHECKS, DEFAULT_CHAIN_EFFECTS
     from catheter_models.lab.residuals import TEST_LABELS
+    from catheter_models.models.blocks import BLOCKS, CHECKS, DEFAULT_CHAIN_EFFECTS
     from catheter_models.plant.config import EFFECTS
 
     lab_of = {b.plant_effect: b for b in BLOCKS.values() if b.plant_effect}
@@ -459,8 +459,8 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
 
 def _greybox_of(model_dir: Path) -> Any:
     """The grey-box model in ``model_dir`` (a DRDPI is the default chain); refused otherwise."""
-    from catheter_models.lab.greybox import GreyBox
     from catheter_models.models import load_model
+    from catheter_models.models.greybox import GreyBox
 
     model = load_model(model_dir)
     chain = GreyBox.chain_of(model)

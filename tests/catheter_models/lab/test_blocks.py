@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 
 from catheter_models.errors import ParameterError
-from catheter_models.lab.blocks import BLOCKS, FORMS, block, ordered
-from catheter_models.lab.cores import make_core
-from catheter_models.lab.greybox import GreyBox
 from catheter_models.models import load_model
 from catheter_models.models.base import ModelError
+from catheter_models.models.blocks import BLOCKS, FORMS, block, ordered
+from catheter_models.models.cores import make_core
 from catheter_models.models.data import simulate_recordings
 from catheter_models.models.drdpi import DRDPI
+from catheter_models.models.greybox import GreyBox
 from catheter_models.units import pa_to_bar, rad_to_deg
 
 RATE_HZ = 250.0

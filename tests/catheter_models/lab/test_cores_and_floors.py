@@ -18,8 +18,6 @@ from foreign_plants import PLANTS
 from foreign_plants.cases import draw_case, make_case
 
 from catheter_models.cli import main
-from catheter_models.lab.blocks import block
-from catheter_models.lab.cores import FreePI
 from catheter_models.lab.diagnose import (
     VENTED_BAR,
     Candidate,
@@ -32,11 +30,13 @@ from catheter_models.lab.diagnose import (
     refit_executor,
 )
 from catheter_models.lab.floors import FilterBankReference, noise_std_deg
-from catheter_models.lab.greybox import GreyBox
 from catheter_models.lab.residuals import residual_tests
 from catheter_models.models import load_model
 from catheter_models.models.base import ModelError
+from catheter_models.models.blocks import block
+from catheter_models.models.cores import FreePI
 from catheter_models.models.evaluate import pooled_rmse
+from catheter_models.models.greybox import GreyBox
 from catheter_models.units import pa_to_bar
 
 REPO = Path(__file__).resolve().parents[3]

@@ -17,9 +17,9 @@ import pytest
 
 from catheter_models.errors import ParameterError
 from catheter_models.lab.diagnose import diagnose
-from catheter_models.lab.greybox import GreyBox
 from catheter_models.lab.signals import lab_test_specs, lab_training_specs
 from catheter_models.models.data import simulate_recordings
+from catheter_models.models.greybox import GreyBox
 from catheter_models.plant.config import PlantConfig
 
 pytestmark = pytest.mark.slow

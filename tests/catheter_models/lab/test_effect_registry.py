@@ -7,9 +7,9 @@ import pytest
 
 from catheter_models import cli
 from catheter_models.lab import diagnose
-from catheter_models.lab.blocks import BLOCKS, CHECKS, DEFAULT_CHAIN_EFFECTS, FORMS, block
 from catheter_models.lab.residuals import TEST_LABELS, TEST_NAMES
 from catheter_models.metrics import REGIMES
+from catheter_models.models.blocks import BLOCKS, CHECKS, DEFAULT_CHAIN_EFFECTS, FORMS, block
 from catheter_models.plant.config import EFFECTS
 
 

@@ -45,14 +45,14 @@ import numpy as np
 import numpy.typing as npt
 
 from catheter_models.errors import CatheterError, ParameterError
-from catheter_models.lab.blocks import BLOCKS, FORMS, block
-from catheter_models.lab.cores import CORES, one_blas_thread
 from catheter_models.lab.floors import FilterBankReference, noise_std_deg
-from catheter_models.lab.greybox import GreyBox
 from catheter_models.lab.residuals import ResidualReport, residual_tests
 from catheter_models.metrics import classify_regimes
 from catheter_models.models.base import FloatArray, Model, Recording
+from catheter_models.models.blocks import BLOCKS, FORMS, block
+from catheter_models.models.cores import CORES, one_blas_thread
 from catheter_models.models.evaluate import pooled_rmse
+from catheter_models.models.greybox import GreyBox
 from catheter_models.units import pa_to_bar, rad_to_deg
 
 BoolArray = npt.NDArray[np.bool_]

@@ -16,9 +16,9 @@ from concurrent.futures import Executor
 from dataclasses import dataclass
 from typing import Any
 
-from catheter_models.lab.cores import CORES
 from catheter_models.lab.diagnose import Diagnosis, diagnose, refit_executor
 from catheter_models.models.base import Model, Recording
+from catheter_models.models.cores import CORES
 from catheter_models.models.drdpi import DRDPI
 
 

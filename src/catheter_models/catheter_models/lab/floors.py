@@ -30,8 +30,8 @@ import numpy as np
 import numpy.typing as npt
 from scipy import signal as sps
 
-from catheter_models.lab.cores import FreePI, one_blas_thread
 from catheter_models.models.base import Recording
+from catheter_models.models.cores import FreePI, one_blas_thread
 from catheter_models.units import pa_to_bar, rad_to_deg
 
 FloatArray = npt.NDArray[np.float64]

@@ -5,12 +5,11 @@ imports torch, and the c-LSTM runs on ONNX Runtime without it. Each kind's loade
 plain import statement, so the registry's dependencies are visible to mypy, to grep and to
 the layering tests, rather than hidden in module-name strings.
 
-The grey-box kind is the one whose class lives outside this package, in the model lab
-(:mod:`catheter_models.lab.greybox`). The lab builds on these models (its DRDPI core, the
-evaluation), so its loader imports it inside the function: a module-level import here would
-make ``catheter_models.models`` and ``catheter_models.lab`` import each other, and would load
-the lab for every model. Imported on first use, there is no cycle at import time, and
-:func:`load_model` still opens a grey-box directory by its manifest's kind like any other.
+The grey-box kind (:mod:`catheter_models.models.greybox`) is a hysteresis core
+(:mod:`catheter_models.models.cores`) with effect blocks (:mod:`catheter_models.models.blocks`)
+around it; the thesis's DRDPI is that chain with the DRDPI core and no blocks. The model lab
+(:mod:`catheter_models.lab`) sits above all of them: it compares, diagnoses and explains, and
+edits chains through this package, never the other way round.
 """
 
 from __future__ import annotations
@@ -68,7 +67,7 @@ def _clstm() -> type[Model]:
 
 
 def _greybox() -> type[Model]:
-    from catheter_models.lab.greybox import GreyBox  # the lab builds on models: see above
+    from catheter_models.models.greybox import GreyBox
 
     return GreyBox
 

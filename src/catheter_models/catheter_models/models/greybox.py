@@ -1,7 +1,7 @@
 """A grey-box model: a readable chain of physical-effect blocks around a hysteresis core.
 
     GreyBox()                                   # the default chain: the thesis's DRDPI
-    GreyBox(core="free_pi")                     # another hysteresis law (lab.cores)
+    GreyBox(core="free_pi")                     # another hysteresis law (models.cores)
     GreyBox(effects=("pneumatic_lag",))         # adding an effect is one line...
     model.with_effect("creep").fit(train)       # ...or one call, warm-started from model
     model.with_core("boucwen").fit(train)       # a core change keeps the blocks
@@ -40,8 +40,6 @@ import numpy.typing as npt
 from scipy import optimize
 
 from catheter_models.errors import ParameterError
-from catheter_models.lab.blocks import FORMS, Block, BlockParam, block, ordered
-from catheter_models.lab.cores import CORES, Core, DRDPICore, FreePI, make_core, one_blas_thread
 from catheter_models.model_dir import Manifest
 from catheter_models.models.base import (
     DataRequirement,
@@ -55,6 +53,8 @@ from catheter_models.models.base import (
     check_finite_step,
     saved_rate_hz,
 )
+from catheter_models.models.blocks import FORMS, Block, BlockParam, block, ordered
+from catheter_models.models.cores import CORES, Core, DRDPICore, FreePI, make_core, one_blas_thread
 from catheter_models.models.drdpi import DRDPI
 from catheter_models.models.evaluate import pooled_rmse
 from catheter_models.units import deg_to_rad, pa_to_bar, rad_to_deg
