@@ -31,22 +31,33 @@ Learned models (LSTM, c-LSTM, SVR) get the floors and the residual tests: they h
 from __future__ import annotations
 
 import math
-import multiprocessing
-import os
-from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import Executor, Future, ProcessPoolExecutor
-from concurrent.futures.process import BrokenProcessPool
-from contextlib import contextmanager, nullcontext
-from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any, Final, ParamSpec, TypeVar
+from collections.abc import Sequence
+from concurrent.futures import Executor, Future
+from contextlib import nullcontext
+from typing import Final
 
 import numpy as np
 import numpy.typing as npt
 
-from catheter_models.errors import CatheterError, ParameterError
+from catheter_models.errors import ParameterError
+from catheter_models.lab.diagnose_plot import plot_diagnosis
 from catheter_models.lab.floors import FilterBankReference, noise_std_deg
+from catheter_models.lab.refit_pool import (
+    RefitWorkerError,
+    default_workers,
+    lab_pool,
+    refit_executor,
+)
 from catheter_models.lab.residuals import ResidualReport, residual_tests
+from catheter_models.lab.verdicts import (
+    CORE_CHANGE,
+    MIN_REDUCTION,
+    NEAR_NOISE,
+    NEAR_REFERENCE,
+    Candidate,
+    Diagnosis,
+    Floors,
+)
 from catheter_models.metrics import classify_regimes
 from catheter_models.models.base import FloatArray, Model, Recording
 from catheter_models.models.blocks import BLOCKS, FORMS, block
@@ -56,19 +67,6 @@ from catheter_models.models.greybox import GreyBox
 from catheter_models.units import pa_to_bar, rad_to_deg
 
 BoolArray = npt.NDArray[np.bool_]
-P = ParamSpec("P")
-T = TypeVar("T")
-
-MIN_REDUCTION: Final = 0.10
-"""Least share of the held-out RMSE a change must remove to be reported."""
-
-NEAR_NOISE: Final = 3.0
-"""A model within this multiple of the noise floor is adequate."""
-
-NEAR_REFERENCE: Final = 1.1
-"""A model far above the noise but within this multiple of the black-box reference's error is
-still unexplained; the verdict adds that no black box learns the rest from these data."""
-
 EVIDENCE_TEST: Final = {e: b.evidence_test for e, b in BLOCKS.items()}
 """The residual test whose signature each effect leaves, as each block says
 (:attr:`Block.evidence_test`)."""
@@ -90,257 +88,6 @@ share of the block's held-out error takes the block's name away. Development see
 both foreign plants, free-weight core: a lag after the core left 0.94-1.39x the error of the
 pneumatic lag with the lag at the valve and 0.20-0.99x with it on the sensor; 1.02-1.63x the
 error of a transport delay with a delay hidden, 0.16-0.77x with a sensor lag."""
-
-CORE_CHANGE: Final = "core"
-
-
-@dataclass
-class Candidate:
-    """One change (a catalogue effect added, or another core), refitted and scored."""
-
-    effect: str
-    """The effect's name, or ``core:<name>`` for a core change."""
-    parameter: str
-    value_si: float
-    display: str
-    rmse_train_deg: float
-    rmse_test_deg: float
-    expected_reduction: float
-    measured_reduction: float
-    evidence: str
-    significant: bool
-    regime_reduction: float = float("nan")
-    """Share of the held-out error removed in the effect's own regimes."""
-    doubts: list[str] = field(default_factory=list)
-    """Why a change that removes error does not earn its place (empty when it does)."""
-    paired_with: str = ""
-    """For a core change: the leading block it was also refitted with, where cores compete
-    (see :func:`_pair_cores_with_the_leading_block`)."""
-    paired_test_deg: float = float("nan")
-    """Held-out RMSE of this core with :attr:`paired_with` [deg]."""
-    paired_doubts: list[str] = field(default_factory=list)
-    """Why the paired block would not earn its place on this core (then it is not counted)."""
-    caveats: list[str] = field(default_factory=list)
-    """What a person should know about a change that does count: its rival on the core's
-    other side fits about as well, so which side the effect is on is not certain."""
-    model: GreyBox | None = field(default=None, repr=False)
-
-    @property
-    def is_core(self) -> bool:
-        """Whether this is a core change rather than an added effect."""
-        return self.effect.startswith(f"{CORE_CHANGE}:")
-
-    @property
-    def name(self) -> str:
-        """What a person types: the effect, or the core's name."""
-        return self.effect.split(":", 1)[1] if self.is_core else self.effect
-
-    @property
-    def reach_deg(self) -> float:
-        """Held-out RMSE this change leads to: alone, or with its paired block if lower."""
-        if self.paired_with and not self.paired_doubts:
-            return min(self.paired_test_deg, self.rmse_test_deg)
-        return self.rmse_test_deg
-
-    def line(self, rank: int) -> str:
-        """The ranked list's line a person reads."""
-        what = f"{self.parameter} = {self.display}"
-        text = (
-            f"{rank}. {self.effect:<16} {what:<34} held-out RMSE "
-            f"{-100 * self.measured_reduction:+6.1f} % "  # '+34.7 %': this change adds error
-            f"(expected {-100 * self.expected_reduction:+6.1f} % from training)"
-        )
-        if self.paired_with:
-            text += f"  with {self.paired_with}: {self.paired_test_deg:.3f} deg held out"
-            if self.paired_doubts:
-                text += f" [not counted: {'; '.join(self.paired_doubts)}]"
-        if self.evidence:
-            text += f"  evidence: {self.evidence}"
-        if self.doubts:
-            text += f"  [not counted: {'; '.join(self.doubts)}]"
-        if self.caveats:
-            text += f"  [but: {'; '.join(self.caveats)}]"
-        return text
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready, without the model."""
-        return {k: v for k, v in self.__dict__.items() if k != "model"}
-
-
-@dataclass
-class Floors:
-    """What the held-out error is judged against [deg]."""
-
-    noise_deg: float
-    reference_deg: float
-    reference: str = "filter-bank black box"
-
-    def near_noise(self, rmse_deg: float) -> bool:
-        """Whether ``rmse_deg`` is within :data:`NEAR_NOISE` times the noise floor."""
-        return math.isfinite(self.noise_deg) and rmse_deg <= NEAR_NOISE * self.noise_deg
-
-    def near_reference(self, rmse_deg: float) -> bool:
-        """Whether ``rmse_deg`` is within :data:`NEAR_REFERENCE` times the black box's."""
-        return math.isfinite(self.reference_deg) and rmse_deg <= NEAR_REFERENCE * (
-            self.reference_deg
-        )
-
-    def text(self, rmse_deg: float) -> str:
-        """``0.46 deg = 7.5 x the noise floor (0.061 deg); black box 0.41 deg``."""
-        parts = [f"noise floor {self.noise_deg:.3f} deg (model {rmse_deg / self.noise_deg:.1f} x)"]
-        if math.isfinite(self.reference_deg):
-            parts.append(f"{self.reference} {self.reference_deg:.3f} deg")
-        return "; ".join(parts)
-
-
-@dataclass
-class Diagnosis:
-    """What :func:`diagnose` found."""
-
-    model_kind: str
-    chain: list[str]
-    rmse_train_deg: float
-    rmse_test_deg: float
-    candidates: list[Candidate]
-    untestable: dict[str, str]
-    residual_report: ResidualReport
-    floors: Floors = field(default_factory=lambda: Floors(float("nan"), float("nan")))
-    regimes_deg: dict[str, float] = field(default_factory=dict)
-    signature: list[str] = field(default_factory=list)
-    note: str = ""
-
-    @property
-    def significant(self) -> list[Candidate]:
-        """Changes that earn their place, best first."""
-        return [c for c in self.candidates if c.significant]
-
-    @property
-    def best(self) -> Candidate | None:
-        """The change to make next, if any: a core change before any block.
-
-        A block is scored against the chain's core. Where that law is wrong, a block is
-        partly scored on what it makes up for the law: on the DRDPI core of the development
-        cases, a lag after the hysteresis and one before it removed the same error within
-        7 %, on the free-weight core up to 4.5x apart. So a block that removes more than a
-        core change is tried again on the new core, not added to the wrong one.
-        """
-        significant = self.significant
-        # Cores are ranked by where they lead: a core that absorbed an effect (fitted it in
-        # training) can beat, alone, the core that would take the effect's block.
-        cores = sorted((c for c in significant if c.is_core), key=lambda c: c.reach_deg)
-        return cores[0] if cores else (significant[0] if significant else None)
-
-    @property
-    def adequate(self) -> bool:
-        """Near the noise floor with nothing left that earns its place."""
-        return self.best is None and self.floors.near_noise(self.rmse_test_deg)
-
-    @property
-    def verdict(self) -> str:
-        """``add <effect>``, ``core <name>``, ``adequate`` or ``unexplained``."""
-        best = self.best
-        if best is not None:
-            return f"core {best.name}" if best.is_core else f"add {best.effect}"
-        if not math.isfinite(self.rmse_test_deg):
-            return "residual tests only"  # an inverse model: its errors are not in degrees
-        return "adequate" if self.floors.near_noise(self.rmse_test_deg) else "unexplained"
-
-    def _worst_regimes(self, n: int = 3) -> str:
-        worst = sorted(self.regimes_deg.items(), key=lambda kv: kv[1], reverse=True)[:n]
-        return ", ".join(f"{k} {v:.3f} deg" for k, v in worst)
-
-    def text(self) -> str:
-        """The report a person reads in the terminal."""
-        lines = [
-            f"Diagnosis of a {self.model_kind} model: {' -> '.join(self.chain)}",
-            f"  RMSE {self.rmse_train_deg:.3f} deg on training data, "
-            f"{self.rmse_test_deg:.3f} deg held out",
-        ]
-        if math.isfinite(self.rmse_test_deg):
-            lines.append(f"  floors: {self.floors.text(self.rmse_test_deg)}")
-        sig = self.residual_report.significant()
-        lines.append(
-            "  residual tests beyond their 95 % band: " + (", ".join(sig) if sig else "none")
-        )
-        if self.note:
-            lines.append(f"  {self.note}")
-        if self.candidates:
-            lines.append("  changes, ranked by the held-out error they remove:")
-            lines += ["    " + c.line(i) for i, c in enumerate(self.candidates, start=1)]
-        for effect, why in self.untestable.items():
-            lines.append(f"    {effect}: not testable here: {why}")
-        verdict = self.verdict
-        best = self.best
-        if best is not None and best.is_core:
-            paired = (
-                f", {best.reach_deg:.3f} deg with {best.paired_with}"
-                if best.reach_deg < best.rmse_test_deg
-                else ""
-            )
-            lines.append(
-                f"  verdict: the core's law is a miss: {best.name} removes "
-                f"{100 * best.measured_reduction:.0f} %{paired}; change it: catheter-lab core "
-                f"{best.name} MODEL -o NEW --train ..."
-            )
-            first = self.significant[0]
-            if first is not best:
-                lines.append(
-                    f"    {first.name} removes more ({100 * first.measured_reduction:.0f} %), "
-                    "scored against a law that is wrong: diagnose again on the new core"
-                )
-        elif best is not None:
-            lines.append(
-                f"  verdict: {best.effect} is missing ({best.parameter} = {best.display}); "
-                f"add it: catheter-lab add {best.effect} MODEL -o NEW --train ..."
-            )
-            lines += [f"    but: {c}" for c in best.caveats]
-        elif verdict == "residual tests only":
-            pass
-        elif verdict == "adequate":
-            lines.append(
-                "  verdict: adequate: near the noise floor "
-                f"({self.floors.text(self.rmse_test_deg)}), and no change removes "
-                f"{100 * MIN_REDUCTION:.0f} % of the held-out error"
-            )
-        else:
-            lines.append(
-                f"  verdict: unexplained: {self.floors.text(self.rmse_test_deg)}; no catalogue "
-                "change earns its place"
-            )
-            if self.floors.near_reference(self.rmse_test_deg):
-                # A black box that does no better does not make the model adequate: the rest
-                # is far from the sensor's noise, only not learnable from the pressure alone.
-                lines.append(
-                    "    the black box does no better: what is left does not follow from the "
-                    "pressure alone (a change over time, an input the model does not see, or "
-                    "too little excitation)"
-                )
-            if self.regimes_deg:
-                lines.append(f"    worst regimes: {self._worst_regimes()}")
-            if self.signature:
-                lines.append(f"    residual signature: {'; '.join(self.signature)}")
-        return "\n".join(lines)
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready."""
-        return {
-            "model_kind": self.model_kind,
-            "chain": self.chain,
-            "rmse_train_deg": self.rmse_train_deg,
-            "rmse_test_deg": self.rmse_test_deg,
-            "verdict": self.verdict,
-            "floors": {
-                "noise_deg": self.floors.noise_deg,
-                "reference_deg": self.floors.reference_deg,
-                "reference": self.floors.reference,
-            },
-            "regimes_deg": self.regimes_deg,
-            "signature": self.signature,
-            "candidates": [c.to_dict() for c in self.candidates],
-            "untestable": self.untestable,
-            "residual_tests": self.residual_report.to_dict(),
-            "note": self.note,
-        }
 
 
 def _rmse_deg(model: Model, recordings: Sequence[Recording]) -> float:
@@ -566,73 +313,6 @@ def _pair_cores_with_the_leading_block(
 @one_blas_thread
 def _reference_rmse_deg(train: Sequence[Recording], test: Sequence[Recording]) -> float:
     return FilterBankReference().fit(train).rmse_deg(test)
-
-
-def default_workers() -> int:
-    """Processes for a diagnosis's refits: one per core the machine lets this process use."""
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-
-
-class RefitWorkerError(CatheterError):
-    """A worker process died while refitting (killed, most often for memory)."""
-
-
-_PACKAGE_ROOT: Final = str(Path(__file__).resolve().parents[2])
-"""The directory this package is imported from (``src/catheter_models`` in a checkout)."""
-
-
-def lab_pool(workers: int) -> ProcessPoolExecutor:
-    """A pool for :func:`diagnose`'s refits (spawned: numba and BLAS are not fork-safe).
-
-    A spawned worker starts with this process's ``sys.path`` and imports this package afresh
-    to unpickle its tasks. A directory of the same name earlier on that path shadows the
-    package there though not here, where it is already imported: pytest puts ``tests/``,
-    which holds ``tests/catheter_models``, first, and every refit failed in the full suite.
-    So each worker first puts the package's root at the front of its own path, with a
-    builtin initializer that needs no import.
-    """
-    return ProcessPoolExecutor(
-        workers,
-        mp_context=multiprocessing.get_context("spawn"),
-        initializer=exec,
-        initargs=(f"import sys; sys.path.insert(0, {_PACKAGE_ROOT!r})",),
-    )
-
-
-class _Serial(Executor):
-    """Runs each task at once, in this process (one worker, or a progress bar to show)."""
-
-    def submit(self, fn: Callable[P, T], /, *args: P.args, **kwargs: P.kwargs) -> Future[T]:
-        future: Future[T] = Future()
-        future.set_result(fn(*args, **kwargs))
-        return future
-
-
-@contextmanager
-def refit_executor(
-    workers: int | None, *, progress: bool = False, tasks: int | None = None
-) -> Iterator[Executor]:
-    """Where refits run; the one place :func:`diagnose` and ``explain`` choose it.
-
-    Worker processes (``workers``, default one per core, at most ``tasks``), or this process
-    for one worker or a progress bar (bars from several processes would garble each other).
-    """
-    n = workers or default_workers()
-    if tasks is not None:
-        n = min(n, tasks)
-    if progress or n <= 1:
-        yield _Serial()
-        return
-    with lab_pool(n) as pool:
-        try:
-            yield pool
-        except BrokenProcessPool as exc:
-            # The pool's own message names no cause and no way out; a person needs both.
-            raise RefitWorkerError(
-                f"a refit's worker process stopped before it answered ({exc}): it was killed, "
-                "most often for memory; run again with --workers 1 (refits in this process) "
-                "or with more memory free"
-            ) from exc
 
 
 @one_blas_thread
@@ -878,34 +558,22 @@ def _diagnose(
     )
 
 
-def plot_diagnosis(diagnosis: Diagnosis, path: Path) -> Path:
-    """Held-out RMSE of the model, of each change, and the floors: why the verdict."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(8.0, 3.8), layout="constrained")
-    names = ["model", *[c.effect for c in diagnosis.candidates]]
-    values = [diagnosis.rmse_test_deg, *[c.rmse_test_deg for c in diagnosis.candidates]]
-    colors = ["grey", *["tab:green" if c.significant else "tab:blue" for c in diagnosis.candidates]]
-    ax.bar(names, values, color=colors)
-    ax.axhline(
-        diagnosis.rmse_test_deg * (1 - MIN_REDUCTION),
-        color="black",
-        lw=0.8,
-        ls="--",
-        label=f"{100 * MIN_REDUCTION:.0f} % below the model: significant",
-    )
-    floors = diagnosis.floors
-    if math.isfinite(floors.noise_deg):
-        ax.axhline(floors.noise_deg, color="tab:red", lw=1.0, label="noise floor")
-    if math.isfinite(floors.reference_deg):
-        ax.axhline(floors.reference_deg, color="tab:purple", lw=1.0, ls=":", label=floors.reference)
-    ax.set_ylabel("held-out RMSE [deg]")
-    ax.set_title(f"{' -> '.join(diagnosis.chain)}: verdict {diagnosis.verdict}")
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.3), fontsize=8, frameon=False, ncol=2)
-    plt.setp(ax.get_xticklabels(), rotation=20, ha="right")
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+# The verdict's types, the pool and the plot live apart (verdicts, refit_pool, diagnose_plot);
+# the diagnosis is still where a user imports them from.
+__all__ = [
+    "CORE_CHANGE",
+    "EFFECT_REGIMES",
+    "EVIDENCE_TEST",
+    "MIN_REDUCTION",
+    "NEAR_NOISE",
+    "NEAR_REFERENCE",
+    "Candidate",
+    "Diagnosis",
+    "Floors",
+    "RefitWorkerError",
+    "default_workers",
+    "diagnose",
+    "lab_pool",
+    "plot_diagnosis",
+    "refit_executor",
+]
