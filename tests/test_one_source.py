@@ -13,7 +13,7 @@ except ``contract.py`` is read with ``ast`` and fails the test, naming ``file:li
 * gives a 250 (``250``, ``250.0``, ``"250.0"``) to something named as a rate: a default of a
   function parameter, a keyword argument or a dataclass field whose name contains ``rate_hz``,
   a value assigned to a name containing ``RATE_HZ``, or the default of a declaration whose
-  first argument names it (``ParamSpec("control_rate_hz", ...)``, ``add_argument("--rate-hz",
+  first argument names it (``BoundedParam("control_rate_hz", ...)``, ``add_argument("--rate-hz",
   default=...)``, ``DeclareLaunchArgument("rate_hz", default_value=...)``).
 
 Words are not numbers: docstrings and comments may say "3 bar" or "250 Hz".
@@ -22,7 +22,7 @@ What is deliberately not a contract number:
 
 * a device's ``full_scale_pa`` (an analog output's span, e.g. 0..6 bar on the CANopen module):
   the hardware's property, which must not move if the contract's parameter bound does;
-* the sanity ranges of rate parameters (``ParamSpec("rate_hz", ..., 10.0, 5000.0, ...)``):
+* the sanity ranges of rate parameters (``BoundedParam("rate_hz", ..., 10.0, 5000.0, ...)``):
   they bound what a user may ask for, not what the contract says, and stay literal;
 * other 250s (a window of 250 samples, a bus address 250): only a 250 named as a rate counts.
 
@@ -55,7 +55,8 @@ from catheter_models.contract import (
     SENSOR_RATE_HZ,
     QosSpec,
 )
-from catheter_models.plant.config import RIG_PARAMS, ParamSpec, PlantConfig
+from catheter_models.limits import BoundedParam
+from catheter_models.plant.config import RIG_PARAMS, PlantConfig
 
 REPO = Path(__file__).resolve().parents[1]
 SRC = REPO / "src"
@@ -134,7 +135,7 @@ def _named_values(tree: ast.AST) -> Iterator[tuple[str, ast.expr]]:
                     yield keyword.arg, keyword.value
             first = node.args[0] if node.args else None
             if isinstance(first, ast.Constant) and isinstance(first.value, str):
-                # A declaration: ParamSpec("rate_hz", 250.0, ...), add_argument("--rate-hz",
+                # A declaration: BoundedParam("rate_hz", 250.0, ...), add_argument("--rate-hz",
                 # default=...), DeclareLaunchArgument("rate_hz", default_value="250.0").
                 if len(node.args) > 1:
                     yield first.value, node.args[1]
@@ -201,17 +202,17 @@ def test_no_contract_number_is_typed_outside_the_contract() -> None:
         "def f(max_pressure_pa=3.0e5): ...",
         "LIMIT = 300_000",
         "x = g(6e5)",
-        "ParamSpec('max_pressure_pa', 0.0, 0.0, 600000.0, 'bound')",
+        "BoundedParam('max_pressure_pa', 0.0, 0.0, 600000.0, 'bound')",
         "DeclareLaunchArgument('max_pressure_pa', default_value='3.0e5')",
         "def f(rate_hz: float = 250.0): ...",
         "DEFAULT_RATE_HZ = 250",
-        "ParamSpec('control_rate_hz', 250.0, 10.0, 2000.0, 'rate')",
+        "BoundedParam('control_rate_hz', 250.0, 10.0, 2000.0, 'rate')",
         "p.add_argument('--rate-hz', type=float, default=250.0)",
         "DeclareLaunchArgument('control_rate_hz', default_value='250.0')",
         "run(sample_rate_hz=250)",
         "class C:\n    rate_hz: float = 250.0",
-        "ParamSpec('max_slew_pa_per_s', 20.0e5, 1.0e3, 1.0e8, 'slew')",
-        "ParamSpec('watchdog_s', 0.1, 0.01, 5.0, 'vent')",
+        "BoundedParam('max_slew_pa_per_s', 20.0e5, 1.0e3, 1.0e8, 'slew')",
+        "BoundedParam('watchdog_s', 0.1, 0.01, 5.0, 'vent')",
         "def f(command_timeout_s: float = 0.1): ...",
     ],
 )
@@ -238,7 +239,7 @@ def f(window: int = 250, full_scale_pa: float = 6.0e5, rate_hz: float = RATE) ->
     address = 250
     return "max_pressure_pa=3.0e5"
 
-ParamSpec("rate_hz", RATE, 10.0, 250.0, "a range bound is not the default")
+BoundedParam("rate_hz", RATE, 10.0, 250.0, "a range bound is not the default")
 '''
     assert typed_contract_numbers(source) == []
 
@@ -246,9 +247,9 @@ ParamSpec("rate_hz", RATE, 10.0, 250.0, "a range bound is not the default")
 # -- the numbers in force are the contract's -------------------------------------------------
 
 
-def _specs(module: ModuleType) -> dict[str, ParamSpec]:
+def _specs(module: ModuleType) -> dict[str, BoundedParam]:
     """The ParamSpecs a node module declares, by parameter name."""
-    return {v.name: v for v in vars(module).values() if isinstance(v, ParamSpec)}
+    return {v.name: v for v in vars(module).values() if isinstance(v, BoundedParam)}
 
 
 def _node_modules() -> dict[str, ModuleType]:

@@ -15,8 +15,9 @@ import numpy as np
 import pytest
 
 from catheter_models.errors import ParameterError
-from catheter_models.feedback import ClosedLoop, FeedbackGains, PIDFeedback, limit_window
+from catheter_models.feedback import ClosedLoop, FeedbackGains, PIDFeedback
 from catheter_models.feedback.tune import LoopModel, design
+from catheter_models.limits import limit_window
 
 RATE_HZ = 250.0
 DT_S = 1.0 / RATE_HZ

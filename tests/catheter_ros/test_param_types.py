@@ -20,10 +20,10 @@ from rclpy.context import Context
 from rclpy.node import Node
 
 from catheter_models.errors import ParameterError
-from catheter_models.plant.config import ParamSpec
+from catheter_models.limits import BoundedParam
 from catheter_ros.params import declare_float, declare_int, declare_plain
 
-RATE = ParamSpec("control_rate_hz", 250.0, 10.0, 2000.0, "control loop rate [Hz]")
+RATE = BoundedParam("control_rate_hz", 250.0, 10.0, 2000.0, "control loop rate [Hz]")
 
 
 @pytest.fixture

@@ -76,7 +76,7 @@ from catheter_models.contract import (
     TRAJECTORY,
 )
 from catheter_models.errors import CatheterError, ParameterError
-from catheter_models.plant.config import ParamSpec
+from catheter_models.limits import BoundedParam
 from catheter_models.shaping import SHAPERS
 from catheter_models.units import AMBIENT_PRESSURE_PA, deg_to_rad, rad_to_deg
 from catheter_ros import diagnostics, messages, qos
@@ -85,33 +85,39 @@ from catheter_ros.node_main import run_node_as_main
 from catheter_ros.params import declare_float, declare_plain
 from catheter_ros.polled import PolledTopics
 
-_RATE = ParamSpec("control_rate_hz", CONTROL_RATE_HZ, 10.0, 2000.0, "control loop rate [Hz]")
-_PMIN = ParamSpec("min_pressure_pa", 0.0, 0.0, PRESSURE_LIMIT_HARD_PA, "lowest command, gauge [Pa]")
-_PMAX = ParamSpec(
+_RATE = BoundedParam("control_rate_hz", CONTROL_RATE_HZ, 10.0, 2000.0, "control loop rate [Hz]")
+_PMIN = BoundedParam(
+    "min_pressure_pa", 0.0, 0.0, PRESSURE_LIMIT_HARD_PA, "lowest command, gauge [Pa]"
+)
+_PMAX = BoundedParam(
     "max_pressure_pa", MAX_PRESSURE_PA, 0.0, PRESSURE_LIMIT_HARD_PA, "highest command, gauge [Pa]"
 )
-_SLEW = ParamSpec("max_slew_pa_per_s", MAX_SLEW_PA_PER_S, 1.0e3, 1.0e8, "command slew limit [Pa/s]")
-_AMAX = ParamSpec("max_angle_rad", deg_to_rad(35.0), 0.0, 1.18, "highest desired bend [rad]")
-_VMAX = ParamSpec(
+_SLEW = BoundedParam(
+    "max_slew_pa_per_s", MAX_SLEW_PA_PER_S, 1.0e3, 1.0e8, "command slew limit [Pa/s]"
+)
+_AMAX = BoundedParam("max_angle_rad", deg_to_rad(35.0), 0.0, 1.18, "highest desired bend [rad]")
+_VMAX = BoundedParam(
     "max_rate_rad_s", deg_to_rad(200.0), 0.0, 100.0, "fastest desired bend rate [rad/s]"
 )
-_ACC = ParamSpec(
+_ACC = BoundedParam(
     "max_accel_rad_s2", deg_to_rad(5000.0), 0.0, 1e4, "highest desired accel [rad/s^2]"
 )
-_WAIT = ParamSpec(
+_WAIT = BoundedParam(
     "driver_wait_s", 5.0, 0.0, 60.0, "hold a plan this long for a valve driver to listen [s]"
 )
-_STALE = ParamSpec(
+_STALE = BoundedParam(
     "sensor_timeout_s", 0.1, 0.01, 5.0, "ramp down when a required sensor is silent this long [s]"
 )
-_HOLD = ParamSpec(
+_HOLD = BoundedParam(
     "hold_timeout_s",
     60.0,
     0.0,
     3600.0,
     "hold a trajectory's last point this long, then ramp down [s] (0: no hold)",
 )
-_AMB = ParamSpec("ambient_pressure_pa", AMBIENT_PRESSURE_PA, 5.0e4, 1.2e5, "ambient pressure [Pa]")
+_AMB = BoundedParam(
+    "ambient_pressure_pa", AMBIENT_PRESSURE_PA, 5.0e4, 1.2e5, "ambient pressure [Pa]"
+)
 
 
 class CompensatorNode(LifecycleLoopNode):

@@ -26,7 +26,8 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from catheter_control.trajectory import TrajectoryPlan
-from catheter_models.feedback import PIDFeedback, limit_window
+from catheter_models.feedback import PIDFeedback
+from catheter_models.limits import limit_window
 from catheter_models.static_map import StaticMap
 
 

@@ -23,7 +23,7 @@ from catheter_models.contract import (
 )
 from catheter_models.errors import SignalError
 from catheter_models.lab.signals import lab_spec
-from catheter_models.plant.config import ParamSpec
+from catheter_models.limits import BoundedParam
 from catheter_models.signals import (
     check_pressure_signal,
     clstm_training_set,
@@ -36,22 +36,24 @@ from catheter_ros.loop_node import LoopNode
 from catheter_ros.node_main import run_node
 from catheter_ros.params import declare_float, declare_int, declare_plain
 
-_RATE = ParamSpec("rate_hz", CONTROL_RATE_HZ, 10.0, 2000.0, "command rate [Hz]")
-_PMAX = ParamSpec(
+_RATE = BoundedParam("rate_hz", CONTROL_RATE_HZ, 10.0, 2000.0, "command rate [Hz]")
+_PMAX = BoundedParam(
     "max_pressure_pa",
     MAX_PRESSURE_PA,
     0.0,
     PRESSURE_LIMIT_HARD_PA,
     "refuse signals above this, gauge [Pa]",
 )
-_TAIL = ParamSpec("tail_s", 1.0, 0.0, 60.0, "zero pressure held after the signal [s]")
-_LEAD_IN = ParamSpec("lead_in_s", 0.5, 0.0, 60.0, "zero pressure sent before the signal [s]")
-_WAIT = ParamSpec("wait_for_subscriber_s", 10.0, 0.0, 600.0, "wait this long for a listener [s]")
-_SLEW = ParamSpec(
+_TAIL = BoundedParam("tail_s", 1.0, 0.0, 60.0, "zero pressure held after the signal [s]")
+_LEAD_IN = BoundedParam("lead_in_s", 0.5, 0.0, 60.0, "zero pressure sent before the signal [s]")
+_WAIT = BoundedParam("wait_for_subscriber_s", 10.0, 0.0, 600.0, "wait this long for a listener [s]")
+_SLEW = BoundedParam(
     "ramp_down_pa_per_s", 2.0e5, 1.0e3, 1.0e7, "slew of the ramp to zero after a signal [Pa/s]"
 )
 _LINGER_S = 0.5
-_AMB = ParamSpec("ambient_pressure_pa", AMBIENT_PRESSURE_PA, 5.0e4, 1.2e5, "ambient pressure [Pa]")
+_AMB = BoundedParam(
+    "ambient_pressure_pa", AMBIENT_PRESSURE_PA, 5.0e4, 1.2e5, "ambient pressure [Pa]"
+)
 
 
 class ExciteNode(LoopNode):

@@ -32,7 +32,7 @@ from catheter_models.contract import (
 )
 from catheter_models.errors import CatheterError
 from catheter_models.geometry import Calibration, LaserGeometry
-from catheter_models.plant.config import ParamSpec
+from catheter_models.limits import BoundedParam
 from catheter_models.units import AMBIENT_PRESSURE_PA
 from catheter_ros import diagnostics, messages, qos
 from catheter_ros.lifecycle_node import (
@@ -45,18 +45,20 @@ from catheter_ros.node_main import run_node_as_main
 from catheter_ros.params import declare_float, declare_plain
 from catheter_ros.rt_loop import DeadlineLoop, MonotonicStamper
 
-_RATE = ParamSpec("rate_hz", SENSOR_RATE_HZ, 10.0, 5000.0, "the ADC bridge's sample rate [Hz]")
+_RATE = BoundedParam("rate_hz", SENSOR_RATE_HZ, 10.0, 5000.0, "the ADC bridge's sample rate [Hz]")
 # The thesis's geometry is LaserGeometry's defaults; the parameters start from them.
 _THESIS = LaserGeometry()
-_M = ParamSpec("laser.m_per_v", _THESIS.m_per_v, 1e-4, 0.1, "eq. 3.1 slope m [m/V]")
-_N = ParamSpec("laser.offset_m", _THESIS.offset_m, 0.0, 1.0, "eq. 3.1 offset n [m]")
-_L = ParamSpec("laser.length_m", _THESIS.length_m, 1e-3, 1.0, "eq. 3.3 bending length L [m]")
-_H = ParamSpec("laser.height_m", _THESIS.height_m, 1e-3, 1.0, "eq. 3.3 sensor height H [m]")
-_ZERO_S = ParamSpec("zero_duration_s", 1.0, 0.1, 30.0, "how long ~/zero averages [s]")
-_ZERO_PA = ParamSpec(
+_M = BoundedParam("laser.m_per_v", _THESIS.m_per_v, 1e-4, 0.1, "eq. 3.1 slope m [m/V]")
+_N = BoundedParam("laser.offset_m", _THESIS.offset_m, 0.0, 1.0, "eq. 3.1 offset n [m]")
+_L = BoundedParam("laser.length_m", _THESIS.length_m, 1e-3, 1.0, "eq. 3.3 bending length L [m]")
+_H = BoundedParam("laser.height_m", _THESIS.height_m, 1e-3, 1.0, "eq. 3.3 sensor height H [m]")
+_ZERO_S = BoundedParam("zero_duration_s", 1.0, 0.1, 30.0, "how long ~/zero averages [s]")
+_ZERO_PA = BoundedParam(
     "zero_max_pressure_pa", 0.05e5, 0.0, 1.0e5, "~/zero refuses above this line pressure [Pa]"
 )
-_AMB = ParamSpec("ambient_pressure_pa", AMBIENT_PRESSURE_PA, 5.0e4, 1.2e5, "ambient pressure [Pa]")
+_AMB = BoundedParam(
+    "ambient_pressure_pa", AMBIENT_PRESSURE_PA, 5.0e4, 1.2e5, "ambient pressure [Pa]"
+)
 _PRESSURE_FRESH_S = 1.0
 """A pressure reading older than this cannot vouch that the muscle is vented."""
 

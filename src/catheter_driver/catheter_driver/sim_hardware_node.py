@@ -36,8 +36,9 @@ from catheter_models.contract import (
     TIP_DISTANCE,
 )
 from catheter_models.errors import CatheterError
+from catheter_models.limits import BoundedParam
 from catheter_models.plant import PlantRunError, make_plant
-from catheter_models.plant.config import EFFECTS, RIG_PARAMS, ParamSpec, PlantConfig
+from catheter_models.plant.config import EFFECTS, RIG_PARAMS, PlantConfig
 from catheter_ros import diagnostics, messages, qos
 from catheter_ros.loop_node import LifecycleLoopNode
 from catheter_ros.node_main import run_node_as_main
@@ -45,14 +46,14 @@ from catheter_ros.params import declare_float, declare_int, declare_plain
 from catheter_ros.polled import PressureCommands
 from catheter_ros.rt_loop import LatencyWindow
 
-_MAX_PRESSURE = ParamSpec(
+_MAX_PRESSURE = BoundedParam(
     "max_pressure_pa",
     MAX_PRESSURE_PA,
     0.0,
     PRESSURE_LIMIT_HARD_PA,
     "safety limit: commands above clamp here, gauge [Pa]",
 )
-_TIMEOUT = ParamSpec(
+_TIMEOUT = BoundedParam(
     "command_timeout_s",
     COMMAND_TIMEOUT_S,
     0.01,

@@ -32,7 +32,7 @@ from catheter_models.contract import (
     PRESSURE_MEASURED,
 )
 from catheter_models.errors import CatheterError
-from catheter_models.plant.config import ParamSpec
+from catheter_models.limits import BoundedParam
 from catheter_models.units import AMBIENT_PRESSURE_PA
 from catheter_ros import diagnostics, messages, qos
 from catheter_ros.lifecycle_node import (
@@ -46,23 +46,27 @@ from catheter_ros.params import declare_float, declare_plain
 from catheter_ros.polled import PressureCommands
 from catheter_ros.rt_loop import DeadlineLoop, LatencyWindow, MonotonicStamper
 
-_RATE = ParamSpec(
+_RATE = BoundedParam(
     "rate_hz", CONTROL_RATE_HZ, 10.0, 2000.0, "control loop and transmitter poll rate [Hz]"
 )
-_PMIN = ParamSpec(
+_PMIN = BoundedParam(
     "min_pressure_pa", 0.0, 0.0, PRESSURE_LIMIT_HARD_PA, "lowest set-point, gauge [Pa]"
 )
-_PMAX = ParamSpec(
+_PMAX = BoundedParam(
     "max_pressure_pa", MAX_PRESSURE_PA, 0.0, PRESSURE_LIMIT_HARD_PA, "highest set-point, gauge [Pa]"
 )
-_SLEW = ParamSpec(
+_SLEW = BoundedParam(
     "max_slew_pa_per_s", MAX_SLEW_PA_PER_S, 1.0e3, 1.0e8, "set-point slew limit [Pa/s]"
 )
-_WATCHDOG = ParamSpec(
+_WATCHDOG = BoundedParam(
     "watchdog_s", COMMAND_TIMEOUT_S, 0.01, 5.0, "vent when commands stop this long [s]"
 )
-_RECONNECT = ParamSpec("reconnect_period_s", 1.0, 0.05, 60.0, "retry a lost device this often [s]")
-_AMB = ParamSpec("ambient_pressure_pa", AMBIENT_PRESSURE_PA, 5.0e4, 1.2e5, "ambient pressure [Pa]")
+_RECONNECT = BoundedParam(
+    "reconnect_period_s", 1.0, 0.05, 60.0, "retry a lost device this often [s]"
+)
+_AMB = BoundedParam(
+    "ambient_pressure_pa", AMBIENT_PRESSURE_PA, 5.0e4, 1.2e5, "ambient pressure [Pa]"
+)
 
 
 class ValveDriverNode(LifecycleNode):

@@ -1,6 +1,6 @@
-"""Declare ROS parameters from the science core's ParamSpec tables, with ranges.
+"""Declare ROS parameters from the science core's BoundedParam tables, with ranges.
 
-The range lives in one place (the ParamSpec); ROS gets it as a FloatingPointRange descriptor,
+The range lives in one place (the BoundedParam); ROS gets it as a FloatingPointRange descriptor,
 so ``ros2 param set`` and launch overrides out of range are refused by rclpy itself, and the
 node re-checks at start-up to give a message that names the range.
 """
@@ -17,10 +17,10 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from catheter_models.errors import ParameterError
-from catheter_models.plant.config import ParamSpec
+from catheter_models.limits import BoundedParam
 
 
-def declare_float(node: Node, name: str, spec: ParamSpec, read_only: bool = True) -> float:
+def declare_float(node: Node, name: str, spec: BoundedParam, read_only: bool = True) -> float:
     """Declare a float parameter with the spec's range and return its (validated) value."""
     descriptor = ParameterDescriptor(
         description=spec.doc,

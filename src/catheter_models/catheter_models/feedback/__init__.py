@@ -11,7 +11,6 @@ from catheter_models.feedback.law import (
     ClosedLoop,
     FeedbackGains,
     PIDFeedback,
-    limit_window,
 )
 
-__all__ = ["GAINS_FILE", "ClosedLoop", "FeedbackGains", "PIDFeedback", "limit_window"]
+__all__ = ["GAINS_FILE", "ClosedLoop", "FeedbackGains", "PIDFeedback"]

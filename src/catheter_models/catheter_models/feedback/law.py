@@ -31,7 +31,8 @@ uses it to correct the command:
 
 :class:`ClosedLoop` puts the pieces together for any plant, one sample at a time: ours, a
 foreign simulator, or a real rig driven by hand. The compensator node uses
-:class:`PIDFeedback` and :func:`limit_window` inside its control core, with the same limits.
+:class:`PIDFeedback` and :func:`~catheter_models.limits.limit_window` inside its control
+core, with the same limits.
 """
 
 from __future__ import annotations
@@ -45,6 +46,7 @@ from typing import Any
 from catheter_models.contract import FEEDBACK_AUTHORITY_PA, FEEDBACK_AUTHORITY_TIMEOUT_S
 from catheter_models.errors import ParameterError
 from catheter_models.feedback.seal import SEAL_KEY, check, write_sealed
+from catheter_models.limits import limit_window
 
 GAINS_FILE = "feedback.json"
 OPENING_ERROR_RAD = math.radians(0.2)
@@ -282,7 +284,8 @@ class PIDFeedback:
         """The command [Pa] for this tick of ``dt_s`` [s].
 
         ``floor_pa``, ``ceiling_pa``: the pressure clamp. ``low_pa``, ``high_pa``: where the
-        command may go this tick (the clamp and the slew limit, :func:`limit_window`).
+        command may go this tick (the clamp and the slew limit,
+        :func:`~catheter_models.limits.limit_window`).
 
         The feedback corrects the feedforward as the clamp lets it through (a feedforward
         asking for less than zero is not the feedback's to undo), by at most its authority.
@@ -357,24 +360,6 @@ def _notch_coefficients(
     a1 = b1  # numerator and denominator share their middle coefficient
     a2 = (k * k - 2.0 * damping * wn * k + wn * wn) / a0
     return b0, b1, b0, a1, a2
-
-
-def limit_window(
-    last_pa: float, floor_pa: float, ceiling_pa: float, max_step_pa: float
-) -> tuple[float, float]:
-    """Where the next command may go: the clamp, and at most ``max_step_pa`` from the last.
-
-    One rule for the node's :class:`~catheter_control.control_core.ControlCore` and for
-    :class:`ClosedLoop`. A last command outside the clamp (a ceiling lowered mid-run) walks
-    back at the slew limit rather than jumping.
-    """
-    low = max(floor_pa, last_pa - max_step_pa)
-    high = min(ceiling_pa, last_pa + max_step_pa)
-    if low > high:
-        # Outside the clamp: move toward it by one step.
-        nearest = min(max(last_pa, floor_pa), ceiling_pa)
-        low = high = min(max(nearest, last_pa - max_step_pa), last_pa + max_step_pa)
-    return low, high
 
 
 class ClosedLoop:

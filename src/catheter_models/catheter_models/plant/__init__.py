@@ -1,6 +1,6 @@
 """The simulated PAM catheter rig (``docs/simulated_rig.md``)."""
 
-from catheter_models.plant.config import EFFECTS, RIG_PARAMS, EffectSpec, ParamSpec, PlantConfig
+from catheter_models.plant.config import EFFECTS, RIG_PARAMS, EffectSpec, PlantConfig
 from catheter_models.plant.interface import (
     CheckedPlant,
     PlantError,
@@ -17,7 +17,6 @@ __all__ = [
     "RIG_PARAMS",
     "CheckedPlant",
     "EffectSpec",
-    "ParamSpec",
     "Plant",
     "PlantConfig",
     "PlantError",

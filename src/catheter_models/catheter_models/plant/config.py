@@ -14,35 +14,14 @@ itself.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Final
 
 from catheter_models.contract import MAX_PRESSURE_PA, SENSOR_RATE_HZ
 from catheter_models.errors import ParameterError
+from catheter_models.limits import BoundedParam
 from catheter_models.units import AMBIENT_PRESSURE_PA, deg_to_rad
-
-
-@dataclass(frozen=True)
-class ParamSpec:
-    """One physical parameter: name with unit suffix, default, closed range and meaning."""
-
-    name: str
-    default: float
-    low: float
-    high: float
-    doc: str
-
-    def check(self, value: float, owner: str) -> float:
-        """Return ``value`` as float if finite and within range, else raise ParameterError."""
-        value = float(value)
-        if not math.isfinite(value) or not self.low <= value <= self.high:
-            raise ParameterError(
-                f"{owner}.{self.name} = {value!r} is outside its range "
-                f"[{self.low:g}, {self.high:g}] ({self.doc})"
-            )
-        return value
 
 
 @dataclass(frozen=True)
@@ -51,10 +30,10 @@ class EffectSpec:
 
     name: str
     physics: str
-    params: tuple[ParamSpec, ...]
+    params: tuple[BoundedParam, ...]
     enabled_in_thesis_rig: bool
 
-    def param(self, name: str) -> ParamSpec:
+    def param(self, name: str) -> BoundedParam:
         """The spec of parameter ``name``; ParameterError lists the valid names."""
         for spec in self.params:
             if spec.name == name:
@@ -74,7 +53,7 @@ EFFECTS: Final[Mapping[str, EffectSpec]] = {
             "(smooth pre-sliding, then sliding at the Coulomb level); the level scales with "
             "the wire's tension (capstan), so a vented muscle lets the tip come home",
             (
-                ParamSpec(
+                BoundedParam(
                     "friction_rad",
                     1.5 * _DEG,
                     0.0,
@@ -82,7 +61,7 @@ EFFECTS: Final[Mapping[str, EffectSpec]] = {
                     "Coulomb friction as equivalent bend at the pull of 1 bar effective pressure "
                     "[rad]",
                 ),
-                ParamSpec(
+                BoundedParam(
                     "presliding_rad",
                     0.6 * _DEG,
                     0.05 * _DEG,
@@ -96,7 +75,7 @@ EFFECTS: Final[Mapping[str, EffectSpec]] = {
             "rate_dependence",
             "viscous friction of the wire in the tube: torque proportional to bend rate",
             (
-                ParamSpec(
+                BoundedParam(
                     "viscous_s",
                     0.005,
                     0.0,
@@ -111,14 +90,14 @@ EFFECTS: Final[Mapping[str, EffectSpec]] = {
             "balloon and braid preload: the muscle makes no force until the balloon meets the "
             "braid at the opening pressure; contact grows over a knee",
             (
-                ParamSpec(
+                BoundedParam(
                     "opening_pressure_pa",
                     0.85e5,
                     0.0,
                     2.0e5,
                     "gauge pressure at which the muscle starts to pull [Pa]",
                 ),
-                ParamSpec(
+                BoundedParam(
                     "knee_pa",
                     0.1e5,
                     1.0e2,
@@ -133,7 +112,7 @@ EFFECTS: Final[Mapping[str, EffectSpec]] = {
             "braid friction whose normal force grows with pressure: the muscle's force gain is "
             "lower while inflating than while deflating",
             (
-                ParamSpec(
+                BoundedParam(
                     "ratio",
                     0.08,
                     0.0,
@@ -147,7 +126,7 @@ EFFECTS: Final[Mapping[str, EffectSpec]] = {
             "saturation",
             "the bend stiffens towards its mechanical limit (elastic torque ~ artanh)",
             (
-                ParamSpec(
+                BoundedParam(
                     "limit_rad",
                     55 * _DEG,
                     20 * _DEG,
@@ -163,7 +142,7 @@ EFFECTS: Final[Mapping[str, EffectSpec]] = {
             "dP/dt = G (P_valve^2 - P_muscle^2), absolute pressures, so the lag is shorter at "
             "high pressure and filling differs from venting",
             (
-                ParamSpec(
+                BoundedParam(
                     "time_constant_s",
                     0.06,
                     0.005,
@@ -176,7 +155,7 @@ EFFECTS: Final[Mapping[str, EffectSpec]] = {
         EffectSpec(
             "transport_delay",
             "pressure-wave travel and valve dead time between the transmitter and the muscle",
-            (ParamSpec("delay_s", 0.02, 0.0, 0.2, "dead time [s]"),),
+            (BoundedParam("delay_s", 0.02, 0.0, 0.2, "dead time [s]"),),
             False,
         ),
         EffectSpec(
@@ -184,14 +163,14 @@ EFFECTS: Final[Mapping[str, EffectSpec]] = {
             "viscoelastic relaxation of polymer and Nitinol: two Maxwell branches (Zener solid) "
             "with time constants tau/2 and 2 tau",
             (
-                ParamSpec(
+                BoundedParam(
                     "fraction",
                     0.1,
                     0.0,
                     0.3,
                     "share of the final bend that arrives by creep after a step [1]",
                 ),
-                ParamSpec(
+                BoundedParam(
                     "time_constant_s",
                     2.0,
                     0.2,
@@ -205,10 +184,10 @@ EFFECTS: Final[Mapping[str, EffectSpec]] = {
             "tip_dynamics",
             "tip inertia against bending stiffness: a lightly damped second-order bend",
             (
-                ParamSpec(
+                BoundedParam(
                     "natural_frequency_hz", 8.0, 2.0, 30.0, "undamped natural frequency [Hz]"
                 ),
-                ParamSpec("damping_ratio", 0.15, 0.02, 1.0, "damping ratio [1]"),
+                BoundedParam("damping_ratio", 0.15, 0.02, 1.0, "damping ratio [1]"),
             ),
             False,
         ),
@@ -217,7 +196,7 @@ EFFECTS: Final[Mapping[str, EffectSpec]] = {
             "thermal drift of the laser mount: the distance offset approaches its new value "
             "exponentially (10 min), seen through the nonlinear eq. 3.3",
             (
-                ParamSpec(
+                BoundedParam(
                     "rate_rad_per_s",
                     1.0 * _DEG / 60.0,
                     -10 * _DEG / 60,
@@ -231,46 +210,46 @@ EFFECTS: Final[Mapping[str, EffectSpec]] = {
 }
 """The effect catalogue (docs/simulated_rig.md), as the plant's physics implements it."""
 
-RIG_PARAMS: Final[tuple[ParamSpec, ...]] = (
-    ParamSpec(
+RIG_PARAMS: Final[tuple[BoundedParam, ...]] = (
+    BoundedParam(
         "valve_time_constant_s",
         0.005,
         0.001,
         0.1,
         "proportional regulator's first-order response [s]",
     ),
-    ParamSpec(
+    BoundedParam(
         "valve_max_pressure_pa",
         MAX_PRESSURE_PA,
         0.5e5,
         10.0e5,
         "highest gauge pressure the valve can deliver; commands are clipped to it [Pa]",
     ),
-    ParamSpec(
+    BoundedParam(
         "bend_gain_rad_per_pa",
         18 * _DEG / 1e5,
         1 * _DEG / 1e5,
         60 * _DEG / 1e5,
         "bend per effective muscle pressure, small-bend stiffness [rad/Pa]",
     ),
-    ParamSpec(
+    BoundedParam(
         "mech_time_constant_s",
         0.003,
         0.0005,
         0.05,
         "structural damping over stiffness of the massless bend [s]",
     ),
-    ParamSpec(
+    BoundedParam(
         "straight_distance_m",
         0.065,
         0.035,
         0.0699,
         "laser distance to the tip marker with the tip straight [m]",
     ),
-    ParamSpec("laser_noise_m", 0.02e-3, 0.0, 1e-3, "laser distance noise, std [m]"),
-    ParamSpec("pressure_noise_pa", 300.0, 0.0, 1e4, "pressure transmitter noise, std [Pa]"),
-    ParamSpec("ambient_pressure_pa", AMBIENT_PRESSURE_PA, 5.0e4, 1.2e5, "ambient pressure [Pa]"),
-    ParamSpec("sample_rate_hz", SENSOR_RATE_HZ, 10.0, 5000.0, "sensor sample rate [Hz]"),
+    BoundedParam("laser_noise_m", 0.02e-3, 0.0, 1e-3, "laser distance noise, std [m]"),
+    BoundedParam("pressure_noise_pa", 300.0, 0.0, 1e4, "pressure transmitter noise, std [Pa]"),
+    BoundedParam("ambient_pressure_pa", AMBIENT_PRESSURE_PA, 5.0e4, 1.2e5, "ambient pressure [Pa]"),
+    BoundedParam("sample_rate_hz", SENSOR_RATE_HZ, 10.0, 5000.0, "sensor sample rate [Hz]"),
 )
 """Parameters of the rig that are always present (not effects)."""
 
