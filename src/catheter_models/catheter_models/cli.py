@@ -357,6 +357,15 @@ def _cmd_effects(_args: argparse.Namespace) -> int:
             )
         else:
             print("    lab: no block (the lab cannot name it)")
+    for block in BLOCKS.values():
+        if block.plant_effect not in EFFECTS:  # an effect the simulated plant does not have
+            print(
+                f"{block.effect}  (lab only: the simulated plant has no such effect)\n"
+                f"    {block.__doc__.splitlines()[0] if block.__doc__ else ''}\n"
+                f"    lab: block {block.effect!r} ({block.side} side; catheter-lab add "
+                f"{block.effect}); evidence: {TEST_LABELS[block.evidence_test]}; "
+                f"shows in: {', '.join(block.regimes)}"
+            )
     for block in CHECKS.values():
         print(
             f"{block.effect}  (lab only: a side check, never named by a diagnosis)\n"

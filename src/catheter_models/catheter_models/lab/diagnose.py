@@ -11,9 +11,9 @@ change the lab knows, each refitted on the training data and scored on held-out 
 Changes are ranked by the held-out error they remove; the next change is a significant core
 change if there is one, else the best significant block. One is **significant** only if it
 removes at least ``min_reduction`` of the held-out error (and some on training data), and,
-for an effect, only if it earns its place: it helps where its effect shows (the regime of
-:data:`EFFECT_REGIMES`) and its parameter is not pinned to the end of its range (a block at
-its limit is standing in for something else).
+for an effect, only if it earns its place: it helps where its effect shows (the regimes its
+block names, ``Block.regimes``) and its parameter is not pinned to the end of its range (a
+block at its limit is standing in for something else).
 
 The verdict is judged against two floors measured on the same data (:mod:`.floors`): the
 sensor's noise, and a black-box reference fitted on the same split. **Adequate** only when
@@ -67,14 +67,6 @@ from catheter_models.models.greybox import GreyBox
 from catheter_models.units import pa_to_bar, rad_to_deg
 
 BoolArray = npt.NDArray[np.bool_]
-EVIDENCE_TEST: Final = {e: b.evidence_test for e, b in BLOCKS.items()}
-"""The residual test whose signature each effect leaves, as each block says
-(:attr:`Block.evidence_test`)."""
-
-EFFECT_REGIMES: Final = {e: b.regimes for e, b in BLOCKS.items()}
-"""The regimes where each effect shows, as each block says (:attr:`Block.regimes`): an effect
-must help there to earn its place."""
-
 VENTED_BAR: Final = 0.3
 """Drive below which the muscle is vented ('vented' regime): below any PAM's opening
 pressure (about 1 bar), so the tip is at rest whatever the plant."""
@@ -253,13 +245,13 @@ def _block_doubts(
     Pinned parameters, values the effect never has, or help least where the effect shows;
     the rival check needs one more refit and is the caller's.
     """
-    before = regimes.rmse_deg(base_residual, EFFECT_REGIMES[effect])
-    after = regimes.rmse_deg(_residuals(fitted, test), EFFECT_REGIMES[effect])
+    before = regimes.rmse_deg(base_residual, BLOCKS[effect].regimes)
+    after = regimes.rmse_deg(_residuals(fitted, test), BLOCKS[effect].regimes)
     in_regime = (before - after) / before if before > 0 else float("nan")
     doubts = _pinned(fitted, effect) + block(effect).unlike_effect(fitted.blocks_[effect])
     if math.isfinite(in_regime) and in_regime < REGIME_SHARE * measured:
         doubts.append(
-            f"helps least where {effect} shows ({', '.join(EFFECT_REGIMES[effect])}: "
+            f"helps least where {effect} shows ({', '.join(BLOCKS[effect].regimes)}: "
             f"{-100 * in_regime:+.0f} % there)"  # '+59 %': it adds error there
         )
     return in_regime, doubts
@@ -526,7 +518,7 @@ def _diagnose(
                 rmse_test_deg=rmse_test_new,
                 expected_reduction=expected,
                 measured_reduction=measured,
-                evidence=report.by_name(EVIDENCE_TEST[e]).evidence(),
+                evidence=report.by_name(BLOCKS[e].evidence_test).evidence(),
                 significant=significant,
                 regime_reduction=in_regime,
                 doubts=doubts if removes else [],
@@ -562,8 +554,6 @@ def _diagnose(
 # the diagnosis is still where a user imports them from.
 __all__ = [
     "CORE_CHANGE",
-    "EFFECT_REGIMES",
-    "EVIDENCE_TEST",
     "MIN_REDUCTION",
     "NEAR_NOISE",
     "NEAR_REFERENCE",
