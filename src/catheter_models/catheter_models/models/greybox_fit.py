@@ -1,0 +1,393 @@
+"""How a grey-box chain is identified: new blocks searched over their ranges, then a polish.
+
+A core linear in its weights (``free_pi``) is solved again at every grid point of a block's
+search (variable projection), in a reduced basis of its play combinations, so an effect the
+core could mimic is still found where it belongs; any other core is held while the blocks are
+searched, then polished with them. :class:`~catheter_models.models.greybox.GreyBox` picks the
+fitter for its core.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections import OrderedDict
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Final
+
+import numpy as np
+from scipy import optimize
+
+from catheter_models.models.base import (
+    FloatArray,
+)
+from catheter_models.models.blocks import FORMS, BlockParam
+from catheter_models.models.cores import Core, FreePI
+
+if TYPE_CHECKING:
+    from catheter_models.models.greybox import GreyBox
+
+REDUCED_COLUMNS: Final = 32
+"""Play combinations a linear core's block search works in (then every play again)."""
+
+STARTS: Final = 2
+"""Grid points that start a joint polish (multi-start)."""
+
+GRID_POINTS: Final = {1: 12, 2: 6, 3: 4}
+"""Grid points per block parameter, by the number of the block's parameters."""
+
+
+def _grid(p: BlockParam, n_params: int) -> FloatArray:
+    """The search grid of one block parameter: log-spaced over a positive range.
+
+    A parameter's ``absent`` value (the block's earlier, simpler form: one creep lag, a lag
+    without a flow limit) is always on it, so the search meets the simpler form too.
+    """
+    n = p.grid_points or GRID_POINTS.get(n_params, 3)
+    if p.low >= 0.0 and p.high > 0.0:
+        low = p.low if p.low > 0.0 else 1e-2 * p.high
+        points = np.geomspace(low, p.high, n)
+        if p.low == 0.0:
+            points = np.concatenate([[0.0], points])
+    else:
+        points = np.linspace(p.low, p.high, n + 1 - n % 2)  # odd: 0 is on the grid
+    if p.absent is not None and p.low <= p.absent <= p.high:
+        near = np.isclose(points, p.absent, rtol=1e-9, atol=0.0)
+        points = np.where(near, p.absent, points) if near.any() else np.sort([*points, p.absent])
+    return np.asarray(points, dtype=float)
+
+
+class _Unit:
+    """Maps bounded parameters to [0, 1] (log for ranges over a decade) for the polish."""
+
+    def __init__(self, low: FloatArray, high: FloatArray) -> None:
+        self.low, self.high = np.asarray(low, dtype=float), np.asarray(high, dtype=float)
+        self.log = (self.low > 0.0) & (self.high / np.where(self.low > 0, self.low, 1) > 10.0)
+
+    def to_unit(self, v: FloatArray) -> FloatArray:
+        v = np.clip(v, self.low, self.high)
+        out = (v - self.low) / (self.high - self.low)
+        lg = self.log
+        out[lg] = np.log(v[lg] / self.low[lg]) / np.log(self.high[lg] / self.low[lg])
+        clipped: FloatArray = np.clip(out, 0.0, 1.0)
+        return clipped
+
+    def from_unit(self, u: FloatArray) -> FloatArray:
+        u = np.clip(u, 0.0, 1.0)
+        out = self.low + u * (self.high - self.low)
+        lg = self.log
+        out[lg] = self.low[lg] * np.exp(u[lg] * np.log(self.high[lg] / self.low[lg]))
+        result: FloatArray = np.asarray(out, dtype=float)
+        return result
+
+
+class _Fitter:
+    """Searches new blocks' parameters and polishes the chain for one kind of core."""
+
+    def __init__(
+        self,
+        model: GreyBox,
+        core: Core,
+        xs: Sequence[FloatArray],
+        ys: Sequence[FloatArray],
+        rate: float,
+    ) -> None:
+        self.model, self.core, self.xs, self.ys, self.rate = model, core, xs, ys, rate
+        self.weights = [1.0 / math.sqrt(x.size) for x in xs]
+        self.specs = [(e, p) for e in model.effects for p in FORMS[e].params]
+
+    def pack(self, blocks: Mapping[str, Sequence[float]]) -> FloatArray:
+        return np.array([v for e in self.model.effects for v in blocks[e]], dtype=float)
+
+    def unpack(self, v: FloatArray) -> dict[str, list[float]]:
+        out: dict[str, list[float]] = {e: [] for e in self.model.effects}
+        for (e, _), value in zip(self.specs, v, strict=True):
+            out[e].append(float(value))
+        return out
+
+    def block_bounds(self) -> tuple[FloatArray, FloatArray]:
+        return (
+            np.array([p.low for _, p in self.specs]),
+            np.array([p.high for _, p in self.specs]),
+        )
+
+    def loss(self, blocks: Mapping[str, Sequence[float]]) -> float:
+        raise NotImplementedError
+
+    @staticmethod
+    def _grid_of(effect: str) -> list[list[float]]:
+        """The first grid of a new block: every parameter's, or the earlier form's alone."""
+        params = FORMS[effect].params
+        if not FORMS[effect].staged_search:
+            return [
+                [float(c) for c in combo]
+                for combo in itertools.product(*(_grid(p, len(params)) for p in params))
+            ]
+        earlier = [p for p in params if p.absent is None]
+        grids = [
+            _grid(p, len(earlier)) if p.absent is None else np.array([p.absent]) for p in params
+        ]
+        return [[float(c) for c in combo] for combo in itertools.product(*grids)]
+
+    def prepare(self, blocks: Mapping[str, Sequence[float]], new: Sequence[str]) -> None:
+        """Set-up before a search (nothing by default)."""
+
+    def polish(self, blocks: dict[str, list[float]]) -> tuple[dict[str, list[float]], float]:
+        raise NotImplementedError
+
+    def search(
+        self, blocks: dict[str, list[float]], new: Sequence[str]
+    ) -> tuple[dict[str, list[float]], float]:
+        """Grid over each new block (the rest held), then polish from the best few points."""
+        self.prepare(blocks, new)
+        starts = [dict(blocks)]
+        for e in new:
+            scored: list[tuple[float, dict[str, list[float]]]] = []
+            base = starts[0]
+            params = FORMS[e].params
+            for combo in self._grid_of(e):
+                trial = {**base, e: combo}
+                scored.append((self.loss(trial), trial))
+            earliest: list[dict[str, list[float]]] = []
+            if FORMS[e].staged_search:
+                # Then the added parameters, around the earlier form's best points; the
+                # earlier form's best starts a polish too, so the search does at least
+                # what it did before the block grew (a coarse fit of the added parameters
+                # can lead the polish to a worse optimum).
+                scored.sort(key=lambda t: t[0])
+                earliest = [scored[0][1]]
+                added = [i for i, p in enumerate(params) if p.absent is not None]
+                grids = [_grid(params[i], len(params)) for i in added]
+                for _, point in scored[:STARTS]:
+                    for combo_added in itertools.product(*grids):
+                        values = list(point[e])
+                        for i, v in zip(added, combo_added, strict=True):
+                            values[i] = float(v)
+                        if values == point[e]:
+                            continue  # the earlier form's point: scored already
+                        trial = {**base, e: values}
+                        scored.append((self.loss(trial), trial))
+            scored.sort(key=lambda t: t[0])
+            starts = [t[1] for t in scored[:STARTS]]
+            if earliest and earliest[0] not in starts:
+                starts[-1] = earliest[0]
+        best: tuple[float, dict[str, list[float]], Core] | None = None
+        core0 = self.core
+        for start in starts:
+            self.core = core0.copy()
+            polished, value = self.polish(start)
+            if best is None or value < best[0]:
+                best = (value, polished, self.core)
+        assert best is not None
+        self.core = best[2]
+        return best[1], best[0]
+
+
+class _NonlinearFitter(_Fitter):
+    """Core held during the grid; polish of core and blocks together."""
+
+    def __init__(self, *args: Any) -> None:
+        super().__init__(*args)
+        rate = self.rate
+        self._held = lambda x: self.core.run(x, rate)
+
+    def loss(self, blocks: Mapping[str, Sequence[float]]) -> float:
+        return float(
+            sum(
+                np.mean((self.model._run(x, self.rate, self._held, blocks) - y) ** 2)
+                for x, y in zip(self.xs, self.ys, strict=True)
+            )
+        )
+
+    def polish(self, blocks: dict[str, list[float]]) -> tuple[dict[str, list[float]], float]:
+        core = self.core
+        lo_c, hi_c = core.bounds()
+        lo_b, hi_b = self.block_bounds()
+        n_core = lo_c.size
+        # Blocks' parameters move in [0, 1] (log over ranges wider than a decade): a flow
+        # limit of 1e8 Pa/s and a share of 0.2 then take like steps, which a raw vector's
+        # relative finite differences and the Jacobian's scaling do not give.
+        unit = _Unit(lo_b, hi_b)
+        lo = np.concatenate([lo_c, np.zeros(lo_b.size)])
+        hi = np.concatenate([hi_c, np.ones(hi_b.size)])
+        v0 = np.clip(np.concatenate([core.vector(), unit.to_unit(self.pack(blocks))]), lo, hi)
+        n_total = sum(x.size for x in self.xs)
+
+        def residuals(v: FloatArray) -> FloatArray:
+            run = core.runner(v[:n_core], self.rate)
+            if run is None:
+                return np.full(n_total, 1e3)
+            bl = self.unpack(unit.from_unit(v[n_core:]))
+            return np.concatenate(
+                [
+                    (self.model._run(x, self.rate, run, bl) - y) * w
+                    for x, y, w in zip(self.xs, self.ys, self.weights, strict=True)
+                ]
+            )
+
+        v_best = v0
+        if self.model.polish_evals > 0:
+            result = optimize.least_squares(
+                residuals,
+                v0,
+                bounds=(lo, hi),
+                method="trf",
+                max_nfev=self.model.polish_evals,
+                x_scale="jac",
+                diff_step=1e-3,
+            )
+            if 2 * result.cost <= float(np.sum(residuals(v0) ** 2)):
+                v_best = result.x
+        core.set_vector(v_best[:n_core])
+        return self.unpack(unit.from_unit(v_best[n_core:])), float(np.sum(residuals(v_best) ** 2))
+
+
+class _LinearFitter(_Fitter):
+    """The core's weights solved exactly for every block setting (variable projection)."""
+
+    def __init__(self, *args: Any) -> None:
+        super().__init__(*args)
+        self._designs: OrderedDict[tuple[float, ...], list[FloatArray]] = OrderedDict()
+        self.basis: FloatArray | None = None
+        self.betas = {self.free.beta_s or 0.0}
+
+    @property
+    def free(self) -> FreePI:
+        """The core being fitted (a copy per start of the polish)."""
+        assert isinstance(self.core, FreePI)
+        return self.core
+
+    def prepare(self, blocks: Mapping[str, Sequence[float]], new: Sequence[str]) -> None:
+        """Reduce the design; free the rate factor when an input block is new.
+
+        The core's rate-dependent thresholds may have stood in for a lag or a delay, so a
+        search with a new input block also tries the core without them.
+        """
+        if any(FORMS[e].side == "input" for e in new):
+            self.betas = {self.free.beta_s or 0.0, 0.0}
+        self.reduce(blocks)
+
+    def reduce(self, blocks: Mapping[str, Sequence[float]]) -> None:
+        """Search in the span of the core's strongest play combinations (and its fit).
+
+        The blocks act on every column of the design; on 20-40 combinations instead of
+        every play the search is several times faster, and the final weights are solved
+        on the whole design again.
+        """
+        beta = self.free.beta_s or 0.0
+        gram = sum(a.T @ a / a.shape[0] for a in self._design(blocks, beta))
+        _, vectors = np.linalg.eigh(np.asarray(gram))
+        keep = [vectors[:, ::-1][:, :REDUCED_COLUMNS]]
+        if self.free.weights is not None:
+            keep.insert(0, self.free.weights[:, None])
+        q, _ = np.linalg.qr(np.hstack(keep))
+        self.basis = q
+        self._designs.clear()
+
+    def _design(self, blocks: Mapping[str, Sequence[float]], beta: float) -> list[FloatArray]:
+        """Per recording: the core's plays on the input blocks' output (a small cache)."""
+        model = self.model
+        key = (beta, *(v for e in model.effects if FORMS[e].side == "input" for v in blocks[e]))
+        if key in self._designs:
+            self._designs.move_to_end(key)
+            return self._designs[key]
+        designs = [
+            self.free.design(model._inputs(x, self.rate, blocks), self.rate, beta) for x in self.xs
+        ]
+        if self.basis is not None:
+            designs = [a @ self.basis for a in designs]
+        self._designs[key] = designs
+        if len(self._designs) > 3:
+            self._designs.popitem(last=False)
+        return designs
+
+    def _solve(
+        self, blocks: Mapping[str, Sequence[float]], beta: float, *, passes: int = 2
+    ) -> tuple[FloatArray, list[FloatArray], list[FloatArray]]:
+        """Weights, and per recording the design through the output blocks and its offset.
+
+        The tip's damping follows the bend entering it, which the weights make: ``passes``
+        solves, each scheduling the tip by the previous weights' bend (the grid takes one).
+        """
+        model = self.model
+        outputs = [e for e in model.effects if FORMS[e].side == "output"]
+        w = self.free.weights
+        if w is not None and self.basis is not None:
+            w = self.basis.T @ w
+        designs = self._design(blocks, beta)
+        passes = passes if any(FORMS[e].scheduled for e in outputs) else 1
+        for _ in range(passes):
+            mats, offsets = [], []
+            for a in designs:
+                m = np.zeros((a.shape[0], a.shape[1] + 1))  # last column: running offset
+                m[:, :-1] = a
+                for e in outputs:
+                    ref = m[:, :-1] @ w + m[:, -1] if w is not None else m[:, :-1].mean(axis=1)
+                    m = model._blocks[e].apply_columns(m, self.rate, blocks[e], ref)
+                mats.append(m[:, :-1])
+                offsets.append(m[:, -1])
+            w, _ = self.free.solve(mats, [y - c for y, c in zip(self.ys, offsets, strict=True)])
+        assert w is not None
+        return w, mats, offsets
+
+    def _residuals(
+        self, blocks: Mapping[str, Sequence[float]], beta: float, *, passes: int = 2
+    ) -> FloatArray:
+        w, mats, offsets = self._solve(blocks, beta, passes=passes)
+        return np.concatenate(
+            [
+                (m @ w + c - y) * k
+                for m, c, y, k in zip(mats, offsets, self.ys, self.weights, strict=True)
+            ]
+        )
+
+    def loss(self, blocks: Mapping[str, Sequence[float]]) -> float:
+        # The rate factor is searched with the blocks: the core's own, or none (a lag or a
+        # delay may be what the core's rate-dependent thresholds were standing in for).
+        return min(float(np.sum(self._residuals(blocks, b, passes=1) ** 2)) for b in self.betas)
+
+    def polish(self, blocks: dict[str, list[float]]) -> tuple[dict[str, list[float]], float]:
+        lo_b, hi_b = self.block_bounds()
+        betas = self.free.betas_s
+        beta_hi = max(*betas, 1e-3)
+        lo, hi = np.concatenate([[0.0], lo_b]), np.concatenate([[beta_hi], hi_b])
+        # The beta that does best with these blocks starts the polish.
+        beta0 = min(self.betas, key=lambda b: float(np.sum(self._residuals(blocks, b) ** 2)))
+        unit = _Unit(lo, hi)
+        v0 = np.concatenate([[beta0], self.pack(blocks)])
+
+        def residuals(u: FloatArray) -> FloatArray:
+            v = unit.from_unit(u)
+            return self._residuals(self.unpack(v[1:]), float(v[0]))
+
+        v_best = v0
+        if self.model.polish_evals > 0 and v0.size > 0:
+            u0 = unit.to_unit(v0)
+            result = optimize.least_squares(
+                residuals,
+                u0,
+                bounds=(0.0, 1.0),
+                method="trf",
+                max_nfev=max(8, self.model.polish_evals // 30),
+                diff_step=1e-3,
+            )
+            if 2 * result.cost <= float(np.sum(residuals(u0) ** 2)):
+                v_best = unit.from_unit(result.x)
+        blocks_best = self.unpack(v_best[1:])
+        beta = float(v_best[0])
+        basis, self.basis = self.basis, None  # the final weights on every play
+        self._designs.clear()
+        w, _, _ = self._solve(blocks_best, beta)
+        self.basis = basis
+        self._designs.clear()
+        self.free.beta_s, self.free.weights = beta, w
+        return blocks_best, float(np.sum(self._residuals_full(blocks_best, beta) ** 2))
+
+    def _residuals_full(self, blocks: Mapping[str, Sequence[float]], beta: float) -> FloatArray:
+        basis, self.basis = self.basis, None
+        self._designs.clear()
+        try:
+            return self._residuals(blocks, beta)
+        finally:
+            self.basis = basis
+            self._designs.clear()
