@@ -41,8 +41,13 @@ from collections.abc import Callable
 from queue import Empty, SimpleQueue
 from typing import Any, Final
 
+from rclpy.node import Node
+from trajectory_msgs.msg import JointTrajectory
+
 from catheter_models.contract import MAX_TRAJECTORY_MESSAGE_BYTES, MAX_TRAJECTORY_POINTS
 from catheter_models.errors import CatheterError
+from catheter_ros import qos
+from catheter_ros.node_main import PARENT_PID_ENV, run_nodes
 
 READY: Final = b"R"
 MESSAGE: Final = b"M"
@@ -136,8 +141,6 @@ class TrajectoryIntake:
         *,
         ready_timeout_s: float = READY_TIMEOUT_S,
     ) -> None:
-        from catheter_ros.node_main import PARENT_PID_ENV
-
         self._node = node
         self._on_message, self._on_refused, self._on_lost = on_message, on_refused, on_lost
         self._queue: SimpleQueue[tuple[bytes, bytes]] = SimpleQueue()
@@ -270,11 +273,6 @@ def _write_all(fd: int, data: bytes) -> None:
 
 
 def _child_node(fd: int, topic: str) -> Any:
-    from rclpy.node import Node
-    from trajectory_msgs.msg import JointTrajectory
-
-    from catheter_ros import qos
-
     class _IntakeNode(Node):
         """Subscribes ``topic`` serialised and passes on what is within the size limit."""
 
@@ -311,8 +309,6 @@ def _child_node(fd: int, topic: str) -> Any:
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m catheter_control.trajectory_intake --fd N --topic T --ros-args ...``."""
-    from catheter_ros.node_main import run_nodes
-
     args = list(sys.argv[1:] if argv is None else argv)
     ros_args = args[args.index("--ros-args") :] if "--ros-args" in args else []
     own = args[: len(args) - len(ros_args)]
