@@ -9,10 +9,8 @@ answering, a cable is pulled) must vent the valve in time, be named on /diagnost
 
 from __future__ import annotations
 
-import gc
 import json
 import math
-import os
 import queue
 import signal
 import subprocess
@@ -36,7 +34,6 @@ from graph_utils import (
     statuses,
     wait_for_recorder,
 )
-from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import FluidPressure, JointState
 
 from catheter_control.bringup import NodeSpec, driver_specs, sim_graph_specs
@@ -177,7 +174,7 @@ def _command_origin_s(bag: BagData, signal_pa: np.ndarray) -> float:
 
     Not simply the bag's first pressure/command: excite never sends sample 0 (the tick that
     sees its first subscriber only marks the start), and a recorder that matched excite late
-    misses more (with the excite executable: up to 465 samples, see ExciteInProcess). The
+    misses more (with the excite executable: up to 465 samples, see _excite). The
     first recorded command is sample m of the signal; m is found by matching the recorded
     values (excite stamps sample i at its deadline, first stamp + i periods, even across
     skipped ticks, so the stamps give each sample's index).
@@ -256,8 +253,11 @@ def _wait_streams(probe: Probe, timeout_s: float) -> None:
     assert flowing, f"no sensor data: {len(angle)} angles, {len(measured)} pressures"
 
 
-class ExciteInProcess:
-    """excite's node (``ExciteNode``) run in this process, started once everyone hears it.
+EXCITE_HELPER = Path(__file__).with_name("excite_when_heard.py")
+
+
+def _excite(children: Children, probe: Probe, label: str, params: dict[str, object]) -> None:
+    """Send the whole signal as ``excite`` does, started once everyone hears it.
 
     Not the ``excite`` executable: it starts its signal as soon as its *first* subscriber on
     pressure/command matches, and the others may match much later. Measured here with the
@@ -265,103 +265,38 @@ class ExciteInProcess:
     subscriber matched 0.003 to 2.4 s after the first (8 tries). With excite as its own
     process, valve_driver missed the first 2.5 s of the signal in one run of three (the bag
     then holds commands the rig never got) and the recorder missed up to 1.9 s in another.
-    Even a publisher added to a participant everyone knows was matched by the recorder up
-    to 1.2 s after the driver. So the node is built (its publisher exists) and started only
-    when every subscriber in the graph has matched it and the recorder says it hears it;
-    the test then checks that the rig counted every command the recorder kept.
+    So ``excite_when_heard.py`` builds excite's node and starts it only when every subscriber
+    the probe counts has matched it and the recorder says it hears it; the test then checks
+    that the rig counted every command the recorder kept. It runs as a process of its own:
+    in the pytest process (as it once did) its loop skipped 1.5 % of its ticks in a CI run.
 
-    Args:
-        domain_id: the test's ROS_DOMAIN_ID.
-        params: excite's parameters.
+    ``probe`` must be subscribed to /diagnostics (it watches the recorder).
     """
-
-    def __init__(self, domain_id: int, params: dict[str, object]) -> None:
-        import rclpy
-
-        self._saved_env = {
-            k: os.environ.get(k) for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")
-        }
-        os.environ["ROS_DOMAIN_ID"] = str(domain_id)
-        os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-        args = node_argv("catheter_control.excite_node", params)
-        # ExciteNode builds its Node in rclpy's default context, so that is the one made here
-        # (nothing else in the test process uses it: each Probe has a context of its own).
-        rclpy.init(
-            args=["excite", *args[args.index("--ros-args") :]],
-            domain_id=domain_id,
-            signal_handler_options=SignalHandlerOptions.NO,
-        )
-
-    def run(self, probe: Probe, timeout_s: float) -> None:
-        """Send the whole signal as ``excite`` does (lingering 0.5 s at the end).
-
-        ``probe`` must be subscribed to /diagnostics (it watches the recorder).
-        """
-        from rclpy.executors import SingleThreadedExecutor
-
-        from catheter_control.excite_node import ExciteNode
-
-        cmd = qualify(PRESSURE_COMMAND)
-        # The rig's streams reaching the probe does not mean the probe has discovered the
-        # rig's and the recorder's command subscriptions yet: each endpoint is announced on its
-        # own (a clean-clone CI run counted 1 of 2 here, with both nodes up).
-        probe.spin_until(lambda: probe.node.count_subscribers(cmd) >= 2, 20.0)
-        subscribers = probe.node.count_subscribers(cmd)
-        assert subscribers >= 2, f"{subscribers} subscribers on {cmd}: rig and recorder?"
-        heard_before = int(recorder_values(probe).get(f"publishers {cmd}", "0"))
-        saved_switch = sys.getswitchinterval()
-        sys.setswitchinterval(0.0005)  # as run_nodes does for processes with deadline loops
-        # As run_nodes does too: what the process holds is collected once and frozen, and no
-        # collection runs while the signal goes out. This loop shares the pytest process, which
-        # by this test holds the objects of a thousand tests before it: a full collection over
-        # them holds the GIL, and so the loop, for longer than a tick. A clean-clone CI run
-        # skipped 58 of 3515 ticks here (1.7 %, refused by the check below) on a machine doing
-        # nothing else; a skipped tick is an input only one of the two runs got.
-        gc.collect()
-        gc.freeze()
-        gc.disable()
-        node = ExciteNode()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        try:
-            ready = probe.spin_until(
-                lambda: (
-                    node.count_subscribers(cmd) >= subscribers
-                    and node._pub.get_subscription_count() >= subscribers
-                    and int(recorder_values(probe).get(f"publishers {cmd}", "0")) > heard_before
-                ),
-                10.0,
-            )
-            assert ready, f"excite's publisher not matched by all {subscribers} subscribers"
-            node.start()
-            end_s = time.monotonic() + timeout_s
-            while not node.done.is_set():
-                assert time.monotonic() < end_s, f"excite not done within {timeout_s:g} s"
-                executor.spin_once(timeout_sec=0.05)
-            linger_s = time.monotonic() + 0.5
-            while time.monotonic() < linger_s:
-                executor.spin_once(timeout_sec=0.05)
-            assert not node.failure, node.failure
-        finally:
-            node.close()
-            executor.remove_node(node)
-            node.destroy_node()
-            executor.shutdown(timeout_sec=2.0)
-            sys.setswitchinterval(saved_switch)
-            gc.enable()
-            gc.unfreeze()
-
-    def close(self) -> None:
-        import rclpy
-
-        try:
-            rclpy.shutdown()
-        finally:
-            for key, value in self._saved_env.items():
-                if value is None:
-                    os.environ.pop(key, None)
-                else:
-                    os.environ[key] = value
+    cmd = qualify(PRESSURE_COMMAND)
+    # The rig's streams reaching the probe does not mean the probe has discovered the
+    # rig's and the recorder's command subscriptions yet: each endpoint is announced on its
+    # own (a clean-clone CI run counted 1 of 2 here, with both nodes up).
+    probe.spin_until(lambda: probe.node.count_subscribers(cmd) >= 2, 20.0)
+    subscribers = probe.node.count_subscribers(cmd)
+    assert subscribers >= 2, f"{subscribers} subscribers on {cmd}: rig and recorder?"
+    heard_before = int(recorder_values(probe).get(f"publishers {cmd}", "0"))
+    argv = node_argv("catheter_control.excite_node", params)
+    argv = [
+        sys.executable,
+        str(EXCITE_HELPER),
+        "--subscribers",
+        str(subscribers),
+        "--heard-before",
+        str(heard_before),
+        "--timeout-s",
+        "60",
+        *argv[argv.index("--ros-args") :],
+    ]
+    done = children.run(f"excite_{label}", argv, timeout_s=120.0)
+    assert done.returncode == 0, (
+        f"excite ({label}): exit {done.returncode}\n{done.stdout}\n{done.stderr}"
+    )
+    print(f"excite ({label}): {done.stdout.strip().splitlines()[-1]}")
 
 
 def _fresh_diagnostics(probe: Probe, node: str) -> dict[str, str]:
@@ -415,46 +350,41 @@ def test_drivers_match_sim_hardware(rig: RigProcess, children: Children, tmp_pat
     t0 = time.monotonic()
     # No lead-in: this test waits for every subscriber itself and matches the recorded
     # commands sample by sample against the preset.
-    excite = ExciteInProcess(
-        children.domain_id, {"signal": SIGNAL, "tail_s": TAIL_S, "lead_in_s": 0.0}
-    )
+    excite: dict[str, object] = {"signal": SIGNAL, "tail_s": TAIL_S, "lead_in_s": 0.0}
     received: dict[str, int] = {}
-    try:
-        # (i) sim_hardware + recorder.
-        sim_bag = tmp_path / "sim_bag"
-        sim = children.graph(
-            sim_graph_specs(sim_bag, {"source": "test_hardware_graph sim"}, with_compensator=False),
-            log_subdir="sim",
+    # (i) sim_hardware + recorder.
+    sim_bag = tmp_path / "sim_bag"
+    sim = children.graph(
+        sim_graph_specs(sim_bag, {"source": "test_hardware_graph sim"}, with_compensator=False),
+        log_subdir="sim",
+    )
+    with Probe(children.domain_id) as probe:
+        _wait_streams(probe, 30.0)
+        _excite(children, probe, "sim", excite)
+        received["sim"] = int(
+            _fresh_diagnostics(probe, "catheter/sim_hardware")["commands_received"]
         )
-        with Probe(children.domain_id) as probe:
-            _wait_streams(probe, 30.0)
-            excite.run(probe, 60.0)
-            received["sim"] = int(
-                _fresh_diagnostics(probe, "catheter/sim_hardware")["commands_received"]
-            )
-        assert sim.stop(timeout_s=15.0) == {"sim_hardware": 0, "recorder": 0}
-        t1 = time.monotonic()
+    assert sim.stop(timeout_s=15.0) == {"sim_hardware": 0, "recorder": 0}
+    t1 = time.monotonic()
 
-        # (ii) emulated rig + valve_driver + laser_angle + compensator + recorder.
-        emu_bag = tmp_path / "emu_bag"
-        specs = _specs(rig, tmp_path)
-        recorder, _sim, compensator = sim_graph_specs(
-            emu_bag, {"source": "test_hardware_graph emulated rig"}
-        )
-        emu = children.graph(
-            [recorder, specs["valve_driver"], specs["laser_angle"], compensator],
-            log_subdir="emu",
-        )
-        with Probe(children.domain_id) as probe:
-            _wait_streams(probe, 30.0)
-            excite.run(probe, 60.0)
-            driver = _fresh_diagnostics(probe, VALVE_DRIVER)
-            received["emu"] = int(driver["commands_received"])
-            state = rig.state()
-            print(f"rig: {state['plant_steps']} samples, {state['steps_caught_up']} caught up late")
-        t2 = time.monotonic()
-    finally:
-        excite.close()
+    # (ii) emulated rig + valve_driver + laser_angle + compensator + recorder.
+    emu_bag = tmp_path / "emu_bag"
+    specs = _specs(rig, tmp_path)
+    recorder, _sim, compensator = sim_graph_specs(
+        emu_bag, {"source": "test_hardware_graph emulated rig"}
+    )
+    emu = children.graph(
+        [recorder, specs["valve_driver"], specs["laser_angle"], compensator],
+        log_subdir="emu",
+    )
+    with Probe(children.domain_id) as probe:
+        _wait_streams(probe, 30.0)
+        _excite(children, probe, "emu", excite)
+        driver = _fresh_diagnostics(probe, VALVE_DRIVER)
+        received["emu"] = int(driver["commands_received"])
+        state = rig.state()
+        print(f"rig: {state['plant_steps']} samples, {state['steps_caught_up']} caught up late")
+    t2 = time.monotonic()
 
     # The compensator on the real drivers: the sim graph test's triangle and bound.
     csv = tmp_path / "triangle.csv"
