@@ -370,3 +370,27 @@ def test_every_lifecycle_node_is_configured_then_activated(
     assert lifecycle
     assert [id(n) for n in fakes.configure] == [id(n) for n in lifecycle]
     assert {id(n) for n in fakes.activate_on_inactive} == {id(n) for n in lifecycle}
+
+
+def test_the_graph_description_names_what_is_installed() -> None:
+    """Each node of the description is its package's console script for its module, and is a
+    lifecycle node exactly when the description says so: the launch files run the executable
+    and ``bringup`` the module, so a mismatch would start two different graphs."""
+    from rclpy.lifecycle import LifecycleNode
+
+    from catheter_control.graph_description import GRAPH
+
+    scripts = {
+        (e.dist.name if e.dist else "", e.name): e.value
+        for e in importlib.metadata.entry_points(group="console_scripts")
+    }
+    for node in GRAPH:
+        assert scripts.get((node.package, node.executable)) == f"{node.module}:main", node
+        module = importlib.import_module(node.module)
+        classes = [
+            obj
+            for obj in vars(module).values()
+            if isinstance(obj, type) and getattr(obj, "__module__", "") == node.module
+        ]
+        is_lifecycle = any(issubclass(cls, LifecycleNode) for cls in classes)
+        assert is_lifecycle == node.lifecycle, (node.name, classes)

@@ -46,6 +46,13 @@ from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING
 
+from catheter_control.graph_description import (
+    BY_NAME,
+    DEACTIVATE_FIRST,
+    LIFECYCLE_MODULES,
+    SIM_COMPENSATOR_PARAMS,
+    graph_nodes,
+)
 from catheter_models.contract import DEFAULT_NAMESPACE
 from catheter_models.errors import CatheterError
 
@@ -66,27 +73,13 @@ def _ros_value(value: object) -> str:
     return repr(value)
 
 
-LIFECYCLE_MODULES = frozenset(
-    {
-        "catheter_driver.sim_hardware_node",
-        "catheter_driver.valve_driver_node",
-        "catheter_driver.laser_angle_node",
-        "catheter_control.compensator_node",
-    }
-)
-"""Nodes that wait, unconfigured, for a manager to configure and activate them."""
-
-SIM_COMPENSATOR_PARAMS: dict[str, object] = {"require_tip_angle": True}
-"""What ``bringup`` and sim.launch.py give the compensator beyond its defaults: the simulated
-rig has a laser, so a run stops if tip/angle goes quiet (a patient's catheter would not)."""
-
-DEACTIVATE_FIRST = ("compensator",)
-"""Deactivated before any process is stopped: the compensator ramps the pressure down."""
-
-
 @dataclass
 class NodeSpec:
-    """One node of the graph: its module (with a ``main``) and parameters."""
+    """One node as ``bringup`` runs it: its module (with a ``main``) and parameters.
+
+    The graph's nodes come from :data:`catheter_control.graph_description.GRAPH`
+    (:meth:`of`); a spec may also run a helper node (``excite``, a recorder of its own).
+    """
 
     name: str
     module: str
@@ -108,6 +101,11 @@ class NodeSpec:
         """``/catheter/compensator``."""
         return f"{namespace.rstrip('/')}/{self.name}"
 
+    @classmethod
+    def of(cls, name: str, params: Params | None = None) -> NodeSpec:
+        """The graph's node ``name`` (graph_description.GRAPH) with ``params``."""
+        return cls(name, BY_NAME[name].module, dict(params or {}))
+
 
 def sim_graph_specs(
     bag_path: Path | None = None,
@@ -120,31 +118,25 @@ def sim_graph_specs(
 ) -> list[NodeSpec]:
     """The simulated graph, in start order: recorder, rig, compensator, and ``tip_tf``.
 
+    The order and the nodes are graph_description.GRAPH's (its ``sim`` graph).
+
     ``tip_tf`` (the robot model and its transforms, for RViz or Foxglove) is what a person
     at the rig looks at; runs that only score or record leave it out (``with_tf=False``),
     since it is one more process beside the control loop.
     """
-    specs = []
+    params: dict[str, Params | None] = {
+        "sim_hardware": sim_params,
+        "compensator": compensator_params,
+        "tip_tf": None,
+    }
     if bag_path is not None:
-        specs.append(
-            NodeSpec(
-                "recorder",
-                "catheter_control.recorder_node",
-                {"bag_path": str(bag_path), "custom_data": json.dumps(dict(custom_data or {}))},
-            )
-        )
-    specs.append(
-        NodeSpec("sim_hardware", "catheter_driver.sim_hardware_node", dict(sim_params or {}))
-    )
-    if with_compensator:
-        specs.append(
-            NodeSpec(
-                "compensator", "catheter_control.compensator_node", dict(compensator_params or {})
-            )
-        )
-    if with_tf:
-        specs.append(NodeSpec("tip_tf", "catheter_control.tip_tf"))
-    return specs
+        custom = json.dumps(dict(custom_data or {}))
+        params["recorder"] = {"bag_path": str(bag_path), "custom_data": custom}
+    if not with_compensator:
+        del params["compensator"]
+    if not with_tf:
+        del params["tip_tf"]
+    return [NodeSpec.of(n.name, params[n.name]) for n in graph_nodes("sim") if n.name in params]
 
 
 class EmulatedDevices:
@@ -238,10 +230,7 @@ def driver_specs(
         "adc.port": str(ports["adc_serial"]["port"]),
         "calibration_file": str(calibration_file),
     }
-    return [
-        NodeSpec("valve_driver", "catheter_driver.valve_driver_node", valve),
-        NodeSpec("laser_angle", "catheter_driver.laser_angle_node", laser),
-    ]
+    return [NodeSpec.of("valve_driver", valve), NodeSpec.of("laser_angle", laser)]
 
 
 class ProcessGraph:

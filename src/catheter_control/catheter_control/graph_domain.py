@@ -16,6 +16,7 @@ import random
 import time
 from collections.abc import Sequence
 
+from catheter_control.graph_description import GRAPH_NODES
 from catheter_models.errors import GraphConflictError
 
 __all__ = [
@@ -93,28 +94,35 @@ def nodes_in_domain(domain_id: int, wait_s: float = DISCOVERY_WAIT_S) -> list[st
         end_s = time.monotonic() + wait_s
         while time.monotonic() < end_s:
             executor.spin_once(timeout_sec=0.1)
-        found = sorted(
+        found = {
             f"{ns.rstrip('/')}/{name}"
             for name, ns in node.get_node_names_and_namespaces()
             if name != probe
-        )
+        }
+        # Node names arrive on ros_discovery_info, apart from the endpoints; a busy machine
+        # once showed neither graph node's name within the look. Every rclpy node serves
+        # ``<node>/get_parameters`` and every lifecycle node publishes
+        # ``<node>/transition_event``, so the endpoints name the nodes too.
+        for service, _types in node.get_service_names_and_types():
+            if service.endswith("/get_parameters") and f"/{probe}/" not in service:
+                found.add(service.removesuffix("/get_parameters"))
+        for topic, _types in node.get_topic_names_and_types():
+            if topic.endswith("/transition_event"):
+                found.add(topic.removesuffix("/transition_event"))
         executor.remove_node(node)
         node.destroy_node()
     finally:
         context.try_shutdown()
-    return found
-
-
-GRAPH_NODES = frozenset(
-    {"sim_hardware", "valve_driver", "laser_angle", "compensator", "recorder", "tip_tf"}
-)
-"""The nodes a launcher starts. Another graph's are what clash (its lifecycle nodes would be
-configured twice, its compensator take our trajectories); a tool in the namespace (a probe,
-``follow_trajectory`` on a running graph, Foxglove's bridge) does not."""
+    return sorted(found)
 
 
 def in_namespace(nodes: Sequence[str], namespace: str) -> list[str]:
-    """The graph's nodes (:data:`GRAPH_NODES`) among ``nodes`` (full names) in ``namespace``."""
+    """The graph's nodes (:data:`GRAPH_NODES`) among ``nodes`` (full names) in ``namespace``.
+
+    Another graph's nodes are what clash (its lifecycle nodes would be configured twice, its
+    compensator take our trajectories); a tool in the namespace (a probe, ``follow_trajectory``
+    on a running graph, Foxglove's bridge) does not.
+    """
     ns = namespace.rstrip("/")
     return [n for n in nodes if n.rsplit("/", 1)[0] == ns and n.rsplit("/", 1)[1] in GRAPH_NODES]
 

@@ -1,10 +1,13 @@
 """What ``sim.launch.py`` and ``rig.launch.py`` share: arguments, nodes, lifecycle wiring.
 
 The two launch files start the same recorder, compensator and ``tip_tf`` beside different
-drivers (the simulated rig, or the real valve driver and laser). Their shared arguments and
-nodes live here so the two cannot drift apart, and so the compensator's choices and rate
-come from the code that defines them (:mod:`catheter_control.models`,
-:mod:`catheter_models.contract`) rather than from a copy typed into each file.
+drivers (the simulated rig, or the real valve driver and laser). Which nodes, in what order,
+which are lifecycle nodes and which launch arguments each takes is the graph description
+(:mod:`catheter_control.graph_description`), which ``bringup`` builds from too;
+:func:`graph_actions` turns it into launch actions. The arguments live here so the two files
+cannot drift apart, and so the compensator's choices and rate come from the code that defines
+them (:mod:`catheter_control.models`, :mod:`catheter_models.contract`) rather than from a copy
+typed into each file.
 
 It is its own module because it imports the ROS ``launch`` packages at its top, which only a
 launch process has: nothing else in catheter_control imports it.
@@ -28,6 +31,7 @@ from launch_ros.events.lifecycle import ChangeState
 from launch_ros.parameter_descriptions import ParameterValue
 from lifecycle_msgs.msg import Transition
 
+from catheter_control.graph_description import GraphName, GraphNode, graph_nodes
 from catheter_control.models import COMPENSATORS, DEFAULT_COMPENSATOR, FEEDBACKS
 from catheter_models.contract import CONTROL_RATE_HZ
 from catheter_models.shaping import SHAPERS
@@ -207,47 +211,55 @@ def recorder_node(namespace: LaunchConfiguration, source: str, hardware: str) ->
     )
 
 
-def compensator_node(namespace: LaunchConfiguration, rt_priority: ParameterValue) -> LifecycleNode:
-    """The compensator, with every argument of :func:`compensator_arguments` as its parameter."""
-    return LifecycleNode(
-        package="catheter_control",
-        executable="compensator",
-        name="compensator",
-        namespace=namespace,
-        parameters=[
-            {
-                "compensator": ParameterValue(LaunchConfiguration("compensator"), value_type=str),
-                "model_dir": ParameterValue(LaunchConfiguration("model_dir"), value_type=str),
-                "feedback": ParameterValue(LaunchConfiguration("feedback"), value_type=str),
-                "feedback_gains": ParameterValue(
-                    LaunchConfiguration("feedback_gains"), value_type=str
-                ),
-                "feedforward_shaping": ParameterValue(
-                    LaunchConfiguration("feedforward_shaping"), value_type=str
-                ),
-                "control_rate_hz": ParameterValue(
-                    LaunchConfiguration("control_rate_hz"), value_type=float
-                ),
-                "require_tip_angle": ParameterValue(
-                    LaunchConfiguration("require_tip_angle"), value_type=bool
-                ),
-                "accept_trajectories": ParameterValue(
-                    LaunchConfiguration("accept_trajectories"), value_type=bool
-                ),
-                "rt_priority": rt_priority,
-            }
-        ],
-        output="screen",
-    )
+_VALUE_TYPES: dict[str, type] = {"str": str, "float": float, "bool": bool, "int": int}
 
 
-def tip_tf_node(namespace: LaunchConfiguration) -> Node:
-    """``tip_tf``, if ``tf``: robot_description, joint_states and /tf for RViz."""
-    return Node(
-        package="catheter_control",
-        executable="tip_tf",
-        name="tip_tf",
-        namespace=namespace,
-        condition=IfCondition(LaunchConfiguration("tf")),
-        output="screen",
-    )
+def launch_node(
+    spec: GraphNode, namespace: LaunchConfiguration, rt_priority: ParameterValue
+) -> Any:
+    """One node of the graph description as a ``Node`` or ``LifecycleNode`` action.
+
+    Its parameter files come first, then its launch arguments as typed parameters (a string
+    argument stays a string, so ``''`` and JSON are not read as YAML), then ``rt_priority``.
+    """
+    values: dict[str, Any] = {
+        param: ParameterValue(LaunchConfiguration(argument), value_type=_VALUE_TYPES[kind])
+        for param, (argument, kind) in spec.launch_params.items()
+    }
+    if spec.rt_priority:
+        values["rt_priority"] = rt_priority
+    parameters: list[Any] = [LaunchConfiguration(name) for name in spec.param_files]
+    if values:
+        parameters.append(values)
+    kwargs: dict[str, Any] = {
+        "package": spec.package,
+        "executable": spec.executable,
+        "name": spec.name,
+        "namespace": namespace,
+        "output": "screen",
+    }
+    if parameters:
+        kwargs["parameters"] = parameters
+    if spec.launch_condition:
+        kwargs["condition"] = IfCondition(LaunchConfiguration(spec.launch_condition))
+    return (LifecycleNode if spec.lifecycle else Node)(**kwargs)
+
+
+def graph_actions(graph: GraphName, *, source: str, hardware: str) -> list[Any]:
+    """Every node of ``graph`` in start order, then each lifecycle node's configure/activate.
+
+    ``source`` and ``hardware`` go into the bag's metadata (see :func:`recorder_node`).
+    """
+    namespace = LaunchConfiguration("namespace")
+    rt_priority = rt_priority_parameter()
+    nodes: list[Any] = []
+    transitions: list[Any] = []
+    for spec in graph_nodes(graph):
+        if spec.name == "recorder":
+            node = recorder_node(namespace, source, hardware)
+        else:
+            node = launch_node(spec, namespace, rt_priority)
+        nodes.append(node)
+        if spec.lifecycle:
+            transitions += configure_then_activate(node)
+    return nodes + transitions

@@ -17,33 +17,27 @@ first run (docs/rig.md).
 On Ctrl-C, launch signals every node at once; the compensator ramps down if the valve driver
 outlives it, and the valve driver vents on shutdown and by its watchdog whatever the order.
 
-The arguments and nodes this file shares with ``sim.launch.py`` are in
-catheter_control/launch_common.py.
+The nodes, their order and their launch arguments are the graph description
+(catheter_control/graph_description.py) that ``bringup`` starts too; the arguments this file
+shares with ``sim.launch.py`` are in catheter_control/launch_common.py.
 """
 
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
-from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
-from launch_ros.actions import LifecycleNode
+from launch.substitutions import PathJoinSubstitution
 from launch_ros.substitutions import FindPackageShare
 
 from catheter_control.launch_common import (
     compensator_arguments,
-    compensator_node,
-    configure_then_activate,
+    graph_actions,
     graph_arguments,
     namespace_argument,
-    recorder_node,
-    rt_priority_parameter,
-    tip_tf_node,
 )
 
 
 def generate_launch_description() -> LaunchDescription:
-    """Arguments, then the recorder, the two drivers and the compensator, in start order."""
+    """Arguments, then the rig graph's nodes (graph_description.GRAPH), in start order."""
     config = PathJoinSubstitution([FindPackageShare("catheter_driver"), "config"])
-    namespace = LaunchConfiguration("namespace")
-    rt_priority = rt_priority_parameter()
     arguments = [
         namespace_argument(
             "namespace of every node (the shipped driver configs are keyed for catheter)"
@@ -70,35 +64,11 @@ def generate_launch_description() -> LaunchDescription:
         ),
         *graph_arguments("rig"),
     ]
-    recorder = recorder_node(namespace, "rig.launch.py", "rig (valve_driver, laser_angle)")
-    valve_driver = LifecycleNode(
-        package="catheter_driver",
-        executable="valve_driver",
-        name="valve_driver",
-        namespace=namespace,
-        parameters=[LaunchConfiguration("valve_config"), {"rt_priority": rt_priority}],
-        output="screen",
-    )
-    laser_angle = LifecycleNode(
-        package="catheter_driver",
-        executable="laser_angle",
-        name="laser_angle",
-        namespace=namespace,
-        parameters=[LaunchConfiguration("laser_config"), {"rt_priority": rt_priority}],
-        output="screen",
-    )
-    compensator = compensator_node(namespace, rt_priority)
-    tip_tf = tip_tf_node(namespace)
     return LaunchDescription(
         [
             *arguments,
-            recorder,
-            valve_driver,
-            laser_angle,
-            compensator,
-            tip_tf,
-            *configure_then_activate(valve_driver),
-            *configure_then_activate(laser_angle),
-            *configure_then_activate(compensator),
+            *graph_actions(
+                "rig", source="rig.launch.py", hardware="rig (valve_driver, laser_angle)"
+            ),
         ]
     )

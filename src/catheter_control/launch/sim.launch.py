@@ -21,32 +21,24 @@ One difference from ``bringup``: on Ctrl-C, launch signals every node at once, w
 compensator still ramps down on SIGINT if the rig outlives it, and the safety does not depend
 on it (the simulated driver vents by its own watchdog), but the bag may miss the last vent.
 
-The arguments and nodes this file shares with ``rig.launch.py`` are in
-catheter_control/launch_common.py.
+The nodes, their order and their launch arguments are the graph description
+(catheter_control/graph_description.py) that ``bringup`` starts too; the arguments this file
+shares with ``rig.launch.py`` are in catheter_control/launch_common.py.
 """
 
 from launch import LaunchDescription
-from launch.substitutions import LaunchConfiguration
-from launch_ros.actions import LifecycleNode
-from launch_ros.parameter_descriptions import ParameterValue
 
 from catheter_control.launch_common import (
     compensator_arguments,
-    compensator_node,
-    configure_then_activate,
+    graph_actions,
     graph_arguments,
     namespace_argument,
     plant_argument,
-    recorder_node,
-    rt_priority_parameter,
-    tip_tf_node,
 )
 
 
 def generate_launch_description() -> LaunchDescription:
-    """Arguments, then the recorder, the simulated rig and the compensator, in start order."""
-    namespace = LaunchConfiguration("namespace")
-    rt_priority = rt_priority_parameter()
+    """Arguments, then the simulated graph's nodes (graph_description.GRAPH), in start order."""
     arguments = [
         namespace_argument(),
         *compensator_arguments(
@@ -61,32 +53,13 @@ def generate_launch_description() -> LaunchDescription:
         plant_argument(),
         *graph_arguments("sim"),
     ]
-    recorder = recorder_node(
-        namespace, "sim.launch.py", "simulated thesis rig (catheter_driver sim_hardware)"
-    )
-    sim_hardware = LifecycleNode(
-        package="catheter_driver",
-        executable="sim_hardware",
-        name="sim_hardware",
-        namespace=namespace,
-        parameters=[
-            {
-                "rt_priority": rt_priority,
-                "plant": ParameterValue(LaunchConfiguration("plant"), value_type=str),
-            }
-        ],
-        output="screen",
-    )
-    compensator = compensator_node(namespace, rt_priority)
-    tip_tf = tip_tf_node(namespace)
     return LaunchDescription(
         [
             *arguments,
-            recorder,
-            sim_hardware,
-            compensator,
-            tip_tf,
-            *configure_then_activate(sim_hardware),
-            *configure_then_activate(compensator),
+            *graph_actions(
+                "sim",
+                source="sim.launch.py",
+                hardware="simulated thesis rig (catheter_driver sim_hardware)",
+            ),
         ]
     )
