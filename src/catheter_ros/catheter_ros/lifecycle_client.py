@@ -120,9 +120,8 @@ class LifecycleManager(Node):
         end_s = self._born_s + ALONE_LOOK_S
         while time.monotonic() < end_s:
             executor.spin_once(timeout_sec=0.05)
-        seen = [f"{ns.rstrip('/')}/{node}" for node, ns in self.get_node_names_and_namespaces()]
         domain = f"ROS_DOMAIN_ID={self.context.get_domain_id()}"
-        twice = [name for name in self.managed if seen.count(name) > 1]
+        twice = self._twice(self.managed)
         if twice:
             raise GraphConflictError(
                 f"another graph already runs in this ROS domain ({domain}): "
@@ -140,8 +139,41 @@ class LifecycleManager(Node):
                     "Stop that graph, or start this one in another domain (--domain-id auto)"
                 )
 
+    def _twice(self, names: list[str]) -> list[str]:
+        """The names among ``names`` that another node in the domain also has.
+
+        Three views of the graph, because they are discovered apart and a slow discovery may
+        have brought one and not yet the others: node names (``ros_discovery_info``), and the
+        servers of ``<name>/change_state`` and publishers of ``<name>/transition_event``
+        (endpoint discovery). A clean-clone CI run on a busy machine saw the other graph's
+        node names only after its first transition, and that graph's node answered it.
+        """
+        seen = [f"{ns.rstrip('/')}/{node}" for node, ns in self.get_node_names_and_namespaces()]
+        return [
+            name
+            for name in names
+            if seen.count(name) > 1
+            or self.count_services(f"{name}/change_state") > 1
+            or self.count_publishers(f"{name}/transition_event") > 1
+        ]
+
+    def _refuse_late_twin(self, name: str, label: str) -> None:
+        """GraphConflictError if another graph's ``name`` has shown up since the first look."""
+        if self._twice([name]):
+            raise GraphConflictError(
+                f"another graph already runs in this ROS domain "
+                f"(ROS_DOMAIN_ID={self.context.get_domain_id()}): {name} is there twice, found "
+                f"before its {label} (discovery was slow); its node would answer this graph's "
+                "transitions. Stop it, or start this graph in another domain (--domain-id auto)"
+            )
+
     def change_state(self, executor: Executor, name: str, transition: int) -> None:
-        """Run one transition of node ``name``; raise LifecycleError naming it and why not."""
+        """Run one transition of node ``name``; raise LifecycleError naming it and why not.
+
+        Raises:
+            GraphConflictError: a node of the same name in another graph was discovered since
+                :meth:`bring_up` looked (before the transition, or as it failed).
+        """
         label = _LABELS[transition]
         client = self._change_state[name]
         gone: list[str] = []
@@ -153,6 +185,7 @@ class LifecycleManager(Node):
             return bool(gone)
 
         self._wait_for_services(executor, name, label)
+        self._refuse_late_twin(name, label)
         request = ChangeState.Request()
         request.transition.id = transition
         self._status.pop(name.lstrip("/"), None)  # a status from after the answer says why
@@ -167,6 +200,8 @@ class LifecycleManager(Node):
             raise LifecycleError(f"{name}: cannot {label}: {gone[0]}")
         response: Any = future.result()
         if response is None or not response.success:
+            # The answer may have come from a twin discovered only now.
+            self._refuse_late_twin(name, label)
             reason = self._reason(executor, name).removeprefix(f"{label} failed: ")
             raise LifecycleError(f"{name}: {label} failed: {reason}")
         self.get_logger().info(f"{name}: {label}d")
