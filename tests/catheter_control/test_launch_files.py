@@ -22,13 +22,9 @@ import pytest
 import yaml
 
 import catheter_control
-from catheter_control.bringup import (
-    LIFECYCLE_MODULES,
-    SIM_COMPENSATOR_PARAMS,
-    NodeSpec,
-    driver_specs,
-    sim_graph_specs,
-)
+from catheter_control.bringup import driver_specs, sim_graph_specs
+from catheter_control.graph_description import LIFECYCLE_MODULES, SIM_COMPENSATOR_PARAMS
+from catheter_control.process_graph import NodeSpec
 
 LAUNCH_DIR = Path(__file__).resolve().parents[2] / "src/catheter_control/launch"
 CONFIGURE, ACTIVATE = 1, 3  # lifecycle_msgs/msg/Transition ids

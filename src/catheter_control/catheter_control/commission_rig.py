@@ -3,7 +3,7 @@
 Commissioning needs the hardware side of the graph (the valve and the laser, or what stands
 in for them) to stay up through every step, while the parts on top come and go: a recorder
 and ``excite`` for each excitation, then a compensator per candidate for the trajectories.
-So the hardware is one :class:`~catheter_control.bringup.ProcessGraph` (or the drivers a
+So the hardware is one :class:`~catheter_control.process_graph.ProcessGraph` (or the drivers a
 person started on the rig), and each step starts and stops its own nodes on it, exactly the
 processes a person would start by hand (docs/commissioning.md lists them).
 
@@ -27,13 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from catheter_control.bringup import (
-    EmulatedDevices,
-    NodeSpec,
-    ProcessGraph,
-    driver_specs,
-    sim_graph_specs,
-)
+from catheter_control.bringup import EmulatedDevices, driver_specs, sim_graph_specs
+from catheter_control.process_graph import NodeSpec, ProcessGraph
 from catheter_control.progress_bar import ProgressBar
 from catheter_control.recording_watch import RecordingWatch
 from catheter_control.tracking_report import RunRecord

@@ -16,12 +16,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-from catheter_control.bringup import (
-    EmulatedDevices,
-    ProcessGraph,
-    driver_specs,
-    sim_graph_specs,
-)
+from catheter_control.bringup import EmulatedDevices, driver_specs, sim_graph_specs
 from catheter_control.graph_domain import choose_domain, default_domain_choice
 from catheter_control.models import (
     SHIPPED,
@@ -30,6 +25,7 @@ from catheter_control.models import (
     resolve_shaping,
     shaper_for,
 )
+from catheter_control.process_graph import ProcessGraph
 from catheter_models.errors import CatheterError, GraphConflictError
 from catheter_models.geometry import Calibration
 from catheter_models.plant import PlantConfig

@@ -23,7 +23,7 @@ from catheter_models.errors import BagError
 from catheter_models.units import NS_PER_S
 
 if TYPE_CHECKING:
-    from catheter_control.bringup import ProcessGraph
+    from catheter_control.process_graph import ProcessGraph
     from catheter_control.tracking_report import RunRecord
 
 RECORDER = "recorder"

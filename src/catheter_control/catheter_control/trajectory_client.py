@@ -30,7 +30,7 @@ from rclpy.task import Future
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectoryPoint
 
-from catheter_control.bringup import ProcessGraph
+from catheter_control.process_graph import ProcessGraph
 from catheter_control.progress_bar import ProgressBar
 from catheter_control.tracking_report import RunRecord
 from catheter_control.trajectory import TrajectoryPlan
