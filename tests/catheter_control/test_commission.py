@@ -9,6 +9,7 @@ import pytest
 from tuned_gains import sealed_gains
 
 from catheter_control import commission as cm
+from catheter_control import commission_steps as steps
 from catheter_control.commission_rig import ResponseCheck, RigChoice, signal_duration_s
 from catheter_models.errors import CatheterError
 from catheter_models.signals import TEST_TRAJECTORIES
@@ -32,7 +33,7 @@ def test_a_done_step_is_not_run_again_while_its_outputs_exist(tmp_path: Path) ->
     out = tmp_path / "made"
     calls: list[int] = []
 
-    def run(rec: cm.StepRecord) -> None:
+    def run(rec: steps.StepRecord) -> None:
         calls.append(1)
         out.write_text("x")
         rec.commands.append("catheter-lab something")
@@ -54,13 +55,13 @@ def test_a_done_step_is_not_run_again_while_its_outputs_exist(tmp_path: Path) ->
 def test_a_failed_step_is_not_recorded_as_done(tmp_path: Path) -> None:
     job = _job(tmp_path)
 
-    def fail(rec: cm.StepRecord) -> None:
-        raise cm.StepError("no")
+    def fail(rec: steps.StepRecord) -> None:
+        raise steps.StepError("no")
 
-    with pytest.raises(cm.StepError):
+    with pytest.raises(steps.StepError):
         job.step("s", "a step", fail)
     assert not job.state.done("s")
-    assert "s" not in json.loads((job.out_dir / cm.STATE_FILE).read_text()).get("steps", {})
+    assert "s" not in json.loads((job.out_dir / steps.STATE_FILE).read_text()).get("steps", {})
 
 
 def test_a_directory_made_on_another_plant_is_refused(tmp_path: Path) -> None:
@@ -82,7 +83,7 @@ def _fake_runs(job: cm.Commission, rmse: dict[str, list[float]]) -> None:
         d.mkdir(parents=True)
         (d / "manifest.json").write_text(json.dumps({"kind": kind}))
         for traj, r in zip(TEST_TRAJECTORIES, values, strict=True):
-            job.state.steps[f"follow:{kind}+pi:{traj}"] = cm.StepRecord(
+            job.state.steps[f"follow:{kind}+pi:{traj}"] = steps.StepRecord(
                 done=True, facts={"rmse_deg": r}
             )
 
@@ -116,7 +117,7 @@ def test_nothing_is_chosen_from_incomplete_runs(tmp_path: Path) -> None:
     job = _job(tmp_path)
     _fake_runs(job, {"idrdpi": [0.2, 0.25, 0.22, 0.28]})
     del job.state.steps[f"follow:idrdpi+pi:{TEST_TRAJECTORIES[0]}"]
-    with pytest.raises(cm.StepError, match="no candidate completed"):
+    with pytest.raises(steps.StepError, match="no candidate completed"):
         job._select()
     assert not (job.out_dir / cm.MODEL_DIR).exists()
 
@@ -155,14 +156,14 @@ def test_a_recording_missing_commands_is_refused_past_its_limit() -> None:
 
 
 def test_the_protocols_are_signals_excite_knows() -> None:
-    for protocol in cm.PROTOCOLS:
-        signals = cm.protocol_signals(protocol)
+    for protocol in steps.PROTOCOLS:
+        signals = steps.protocol_signals(protocol)
         assert set(signals) == {"train", "test"}
         # Training and held-out data never share a signal.
         assert not set(signals["train"]) & set(signals["test"])
         # Fast steps in the training set: tune needs them.
         assert any(s.startswith("lab_steps_") for s in signals["train"])
-    full = cm.protocol_signals("full")
+    full = steps.protocol_signals("full")
     assert 200.0 < signal_duration_s(full["train"]) < 300.0
     assert 100.0 < signal_duration_s(full["test"]) < 160.0
 

@@ -11,6 +11,7 @@ import pytest
 from tuned_gains import sealed_gains
 
 from catheter_control import commission as cm
+from catheter_control import commission_steps as steps
 from catheter_control.commission_rig import RigChoice
 from catheter_control.control_core import ControlCore
 from catheter_control.models import (
@@ -147,7 +148,7 @@ def test_commission_tries_a_shaped_candidate_on_a_ringing_tip_and_records_its_ch
     (d / "manifest.json").write_text(json.dumps({"kind": "idrdpi"}))
     for name, rmse in (("idrdpi+pi", 0.9), ("idrdpi+zvd+pi", 0.5)):
         for traj in TEST_TRAJECTORIES:
-            job.state.steps[f"follow:{name}:{traj}"] = cm.StepRecord(
+            job.state.steps[f"follow:{name}:{traj}"] = steps.StepRecord(
                 done=True, facts={"rmse_deg": rmse}
             )
     job._select()

@@ -20,8 +20,8 @@ from catheter_control.commission import (
     EXIT_BELOW_TARGET,
     EXIT_STOPPED,
     MODEL_DIR,
-    STATE_FILE,
 )
+from catheter_control.commission_steps import STATE_FILE
 
 pytestmark = pytest.mark.slow
 

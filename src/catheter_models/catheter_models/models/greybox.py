@@ -212,6 +212,18 @@ class GreyBox(Model):
             for e in self.effects
         }
 
+    def dead_time_s(self) -> float | None:
+        """How far the bend lags the command through the chain's blocks [s], to first order.
+
+        The sum of each block's :attr:`~Block.dead_time_param` (a transport delay's delay, a
+        pneumatic lag's time constant); None when no block of the chain delays the bend.
+        """
+        values = self.block_values()
+        found = [
+            values[e][FORMS[e].dead_time_param] for e in self.effects if FORMS[e].dead_time_param
+        ]
+        return float(sum(found)) if found else None
+
     # -- simulation (internal units: bar in, deg out) ----------------------------------------
     def _inputs(
         self, x_bar: FloatArray, rate_hz: float, blocks: Mapping[str, Sequence[float]]

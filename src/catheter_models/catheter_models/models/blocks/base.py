@@ -108,6 +108,10 @@ class Block(ABC):
     plant_effect: ClassVar[str] = ""
     """The simulated plant's effect with the same physics (a key of ``plant.config.EFFECTS``),
     which ``catheter-lab effects`` shows beside it ('' where the plant has none)."""
+    dead_time_param: ClassVar[str] = ""
+    """The parameter by which the block delays the bend behind the command [s], to first order
+    (a delay by its delay, a lag by its time constant); '' for a block that does not. A
+    compensator reads the plan that far ahead (:meth:`GreyBox.dead_time_s`)."""
 
     @abstractmethod
     def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:

@@ -59,6 +59,7 @@ class PneumaticLag(Block):
     regimes = ("fast_motion", "loading", "unloading")
     plant_effect = "pneumatic_lag"
     side: ClassVar[Side] = "input"
+    dead_time_param = "time_constant_s"
     params = (
         BlockParam(
             "time_constant_s",

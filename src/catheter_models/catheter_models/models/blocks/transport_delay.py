@@ -30,6 +30,7 @@ class TransportDelay(Block):
     regimes = ("fast_motion", "loading", "unloading")
     plant_effect = "transport_delay"
     side: ClassVar[Side] = "input"
+    dead_time_param = "delay_s"
     params = (BlockParam("delay_s", "s", 0.0, 0.2, 0.01, "dead time", 1e3, "ms"),)
     primary = "delay_s"
     needs = "pressure changes faster than the delay"
