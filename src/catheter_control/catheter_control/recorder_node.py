@@ -48,7 +48,7 @@ from rclpy.subscription import Subscription
 
 from catheter_models import __version__
 from catheter_models.bag import LATCHED_QOS, STREAM_QOS, BagRecorder
-from catheter_models.bag.writer import BagWriteError, CloseOutcome, WriteFailure
+from catheter_models.bag.write_failure import BagWriteError, CloseOutcome, WriteFailure
 from catheter_models.contract import RECORDED_TOPICS, TRAJECTORY, TopicSpec
 from catheter_models.errors import ParameterError
 from catheter_models.gaps import StreamGaps, header_stamp_ns, pauses_between_runs

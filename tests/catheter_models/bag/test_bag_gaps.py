@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from catheter_models.bag.from_arrays import write_bag_from_arrays
 from catheter_models.bag.info import bag_info
-from catheter_models.bag.writer import write_bag_from_arrays
 from catheter_models.gaps import BagGapWarning
 from catheter_models.models.data import recording_from_bag
 

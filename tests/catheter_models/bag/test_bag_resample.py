@@ -17,7 +17,7 @@ import pytest
 
 from catheter_models.bag import BagRecorder, load_bag
 from catheter_models.bag.messages import fluid_pressure_cdr, joint_state_cdr
-from catheter_models.bag.reader import HOLD_TOLERANCE, BagData
+from catheter_models.bag.series import HOLD_TOLERANCE, BagData
 from catheter_models.contract import ANGLE_DESIRED, PRESSURE_COMMAND, PRESSURE_MEASURED, TIP_ANGLE
 from catheter_models.feedback.tune import find_steps
 from catheter_models.lab.signals import lab_spec

@@ -29,7 +29,7 @@ from catheter_models.bag.space import (
     contract_streams,
     need_for,
 )
-from catheter_models.bag.writer import BagWriteError
+from catheter_models.bag.write_failure import BagWriteError
 from catheter_models.contract import PRESSURE_COMMAND
 
 EPOCH_NS = 1_700_000_000_000_000_000

@@ -1,4 +1,4 @@
-"""Writing rosbag2 MCAP bags: the streaming recorder core, and bags built from arrays.
+"""Writing rosbag2 MCAP bags: the streaming recorder core.
 
 ``BagRecorder`` is what the recorder node wraps (it imports no rclpy). It takes messages that are
 already CDR-serialized, as a raw subscription delivers them, and writes a rosbag2 directory::
@@ -17,38 +17,31 @@ writes nothing more: ``close`` then cuts the file back to its last complete flus
 exactly what a killed recording leaves (every flushed chunk, no footer; ``bag repair``
 recovers it), and ``metadata.yaml`` counts what that holds. A partly written chunk after it
 would make the file unreadable past it, and a footer after a failed write cannot be trusted.
-``close`` says which it left: :class:`CloseOutcome`.
+``close`` says which it left: :class:`CloseOutcome`. Those three types live in
+``bag.write_failure``; bags built from sampled arrays (``write_bag_from_arrays``) in
+``bag.from_arrays``.
 """
 
 from __future__ import annotations
 
 import contextlib
 import datetime as dt
-import errno as errno_codes
 import os
 import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from types import TracebackType
 from typing import IO, Any, Final, Literal, NamedTuple
 
-import numpy as np
-import numpy.typing as npt
 from mcap.well_known import MessageEncoding, Profile, SchemaEncoding
 from mcap.writer import CompressionType, Writer
 
 from catheter_models import __version__
-from catheter_models.bag.messages import (
-    fluid_pressure_cdr,
-    joint_state_cdr,
-    kilted_typestore,
-    range_cdr,
-)
+from catheter_models.bag.messages import kilted_typestore
 from catheter_models.bag.metadata import (
     METADATA_FILE,
-    STREAM_QOS,
     BagSummary,
     QosProfile,
     TopicSummary,
@@ -57,17 +50,9 @@ from catheter_models.bag.metadata import (
     qos_to_channel_string,
     write_metadata,
 )
-from catheter_models.contract import (
-    ANGLE_DESIRED,
-    DEFAULT_NAMESPACE,
-    PRESSURE_COMMAND,
-    PRESSURE_MEASURED,
-    TIP_ANGLE,
-    TIP_DISTANCE,
-    qualify,
-)
+from catheter_models.bag.write_failure import BagWriteError, CloseOutcome, WriteFailure
 from catheter_models.errors import BagError, ParameterError
-from catheter_models.units import AMBIENT_PRESSURE_PA, NS_PER_S, s_to_ns
+from catheter_models.units import NS_PER_S, s_to_ns
 
 DEFAULT_FLUSH_PERIOD_S: Final = 0.5
 DEFAULT_CHUNK_SIZE_BYTES: Final = 1024 * 1024
@@ -113,80 +98,6 @@ class _LogExtent:
     def add(self, log_time_ns: int) -> None:
         self.first_ns = log_time_ns if self.first_ns is None else min(self.first_ns, log_time_ns)
         self.last_ns = log_time_ns if self.last_ns is None else max(self.last_ns, log_time_ns)
-
-
-@dataclass(frozen=True)
-class WriteFailure:
-    """Why a bag stopped being written: the error, the file, and when.
-
-    Attributes:
-        path: The file the write failed on.
-        operation: What was being done: ``write``, ``flush`` or ``close``.
-        errno: The OS error number (``errno.ENOSPC``), or None for an error that is not the
-            OS's (a bug, a closed stream).
-        reason: The error as a person reads it (``No space left on device``).
-        at_ns: When it failed: wall clock [ns since the Unix epoch].
-    """
-
-    path: Path
-    operation: str
-    errno: int | None
-    reason: str
-    at_ns: int
-
-    @classmethod
-    def of(cls, path: Path, operation: str, exc: BaseException) -> WriteFailure:
-        """The failure ``exc`` raised while doing ``operation`` on ``path``, timed now."""
-        if isinstance(exc, OSError) and exc.errno is not None:
-            reason = exc.strerror or str(exc)
-            return cls(path, operation, exc.errno, reason, time.time_ns())
-        return cls(path, operation, None, repr(exc), time.time_ns())
-
-    @property
-    def errno_name(self) -> str:
-        """``ENOSPC``; '' when the error is not the OS's."""
-        if self.errno is None:
-            return ""
-        return errno_codes.errorcode.get(self.errno, str(self.errno))
-
-    def describe(self) -> str:
-        """``No space left on device (ENOSPC) on flush of /x/bag_0.mcap at 12:00:01.250``."""
-        when = dt.datetime.fromtimestamp(self.at_ns / NS_PER_S).isoformat(timespec="milliseconds")
-        code = f" ({self.errno_name})" if self.errno_name else ""
-        return f"{self.reason}{code} on {self.operation} of {self.path} at {when}"
-
-
-class BagWriteError(BagError):
-    """The bag could not be written (disk full, I/O error); ``failure`` says why and when."""
-
-    def __init__(self, failure: WriteFailure) -> None:
-        super().__init__(f"cannot write bag: {failure.describe()}")
-        self.failure = failure
-
-
-@dataclass(frozen=True)
-class CloseOutcome:
-    """What a closed bag holds, and whether any MCAP reader opens it as it is.
-
-    Attributes:
-        finished: True: summary and footer written, the bag is complete. False: the file
-            ends at its last complete flush with no footer (a write failed); ``catheter-lab
-            bag repair`` recovers every message it holds.
-        messages: Messages the file holds (all written when finished, else up to the last
-            complete flush).
-        until_ns: Log time of the newest message it holds [ns, epoch]; None if none.
-        failure: Why writing stopped (None for a bag closed as planned).
-        note: One line for a person: what the file holds and what to do with it (the
-            failure is ``failure``'s to say).
-        per_topic: ``messages`` by topic.
-    """
-
-    finished: bool
-    messages: int
-    until_ns: int | None
-    failure: WriteFailure | None
-    note: str
-    per_topic: Mapping[str, int] = field(default_factory=dict)
 
 
 @dataclass
@@ -642,130 +553,3 @@ class BagRecorder:
 
     def _summary_yaml_body(self) -> str:
         return dump_yaml(self._summary().to_yaml_dict()).strip()
-
-
-# -- bags from arrays -------------------------------------------------------------------------
-
-DEFAULT_DISTANCE_RANGE_M: Final = (0.0, 1.0)
-"""``Range.min_range``/``max_range`` for synthetic laser data [m]: covers any plausible value."""
-
-
-def _as_series(name: str, values: npt.ArrayLike, n: int) -> npt.NDArray[np.float64]:
-    arr = np.asarray(values, dtype=np.float64)
-    if arr.shape != (n,):
-        msg = f"{name} has shape {arr.shape}; expected ({n},) like t_s"
-        raise ParameterError(msg)
-    return arr
-
-
-def write_bag_from_arrays(
-    path: Path | str,
-    t_s: npt.ArrayLike,
-    pressure_command_pa_gauge: npt.ArrayLike,
-    pressure_measured_pa_gauge: npt.ArrayLike,
-    angle_rad: npt.ArrayLike,
-    *,
-    distance_m: npt.ArrayLike | None = None,
-    angle_desired_rad: npt.ArrayLike | None = None,
-    custom_data: Mapping[str, str] | None = None,
-    ambient_pa: float = AMBIENT_PRESSURE_PA,
-    namespace: str = DEFAULT_NAMESPACE,
-    start_time_ns: int | None = None,
-    distance_range_m: tuple[float, float] = DEFAULT_DISTANCE_RANGE_M,
-    compression: Compression = "none",
-) -> Path:
-    """Write a contract-conforming bag from sampled arrays (sample bags, tests; no ROS).
-
-    Every array holds one value per sample time. Each message's ``header.stamp`` is the time the
-    value was true, ``start_time_ns + t_s``; its log and publish times are the same instant.
-    Values are written as given, NaN included, so a test can build a faulty bag.
-
-    Args:
-        path: Bag directory to create (must not exist).
-        t_s: Sample times [s] relative to ``start_time_ns``; finite and strictly increasing.
-        pressure_command_pa_gauge: Valve set-point [Pa gauge], on ``pressure/command``.
-        pressure_measured_pa_gauge: Line pressure [Pa gauge], on ``pressure/measured``.
-        angle_rad: Bending angle [rad], on ``tip/angle`` (joint ``bend``).
-        distance_m: Laser distance [m] on ``tip/distance``; None: topic not written.
-        angle_desired_rad: Set-point angle [rad] on ``angle/desired``; None: not written.
-        custom_data: Experiment description for ``metadata.yaml``.
-        ambient_pa: Ambient pressure [Pa absolute] added to make ``FluidPressure`` absolute.
-        namespace: Namespace of the contract's relative topics.
-        start_time_ns: Epoch of ``t_s`` [ns since the Unix epoch]. None: now. Pass a fixed value
-            for byte-identical files.
-        distance_range_m: ``Range.min_range`` and ``max_range`` [m].
-        compression: MCAP chunk compression.
-
-    Returns:
-        The bag directory.
-
-    Raises:
-        ParameterError: Arrays of unequal length, or ``t_s`` not finite and increasing.
-        BagError: ``path`` already exists.
-    """
-    times_s = np.asarray(t_s, dtype=np.float64)
-    if times_s.ndim != 1 or times_s.size == 0:
-        msg = f"t_s has shape {times_s.shape}; expected a non-empty 1-D array of times [s]"
-        raise ParameterError(msg)
-    if not np.all(np.isfinite(times_s)):
-        msg = "t_s holds non-finite times; every sample needs a finite time [s]"
-        raise ParameterError(msg)
-    if times_s.size > 1 and not np.all(np.diff(times_s) > 0.0):
-        msg = "t_s is not strictly increasing; sample times must advance"
-        raise ParameterError(msg)
-    n = times_s.size
-    command = _as_series("pressure_command_pa_gauge", pressure_command_pa_gauge, n)
-    measured = _as_series("pressure_measured_pa_gauge", pressure_measured_pa_gauge, n)
-    angle = _as_series("angle_rad", angle_rad, n)
-    distance = None if distance_m is None else _as_series("distance_m", distance_m, n)
-    desired = (
-        None if angle_desired_rad is None else _as_series("angle_desired_rad", angle_desired_rad, n)
-    )
-    epoch_ns = time.time_ns() if start_time_ns is None else int(start_time_ns)
-    # Integer ns per sample, rounded once, so stamps and log times agree exactly.
-    stamps_ns = epoch_ns + np.round(times_s * NS_PER_S).astype(np.int64)
-    min_range_m, max_range_m = distance_range_m
-
-    topic_command = qualify(PRESSURE_COMMAND, namespace)
-    topic_measured = qualify(PRESSURE_MEASURED, namespace)
-    topic_angle = qualify(TIP_ANGLE, namespace)
-    topic_distance = qualify(TIP_DISTANCE, namespace)
-    topic_desired = qualify(ANGLE_DESIRED, namespace)
-
-    with BagRecorder(
-        path, custom_data=custom_data, flush_period_s=None, compression=compression
-    ) as rec:
-        rec.add_topic(topic_command, PRESSURE_COMMAND.msgtype, offered_qos=[STREAM_QOS])
-        rec.add_topic(topic_measured, PRESSURE_MEASURED.msgtype, offered_qos=[STREAM_QOS])
-        rec.add_topic(topic_angle, TIP_ANGLE.msgtype, offered_qos=[STREAM_QOS])
-        if distance is not None:
-            rec.add_topic(topic_distance, TIP_DISTANCE.msgtype, offered_qos=[STREAM_QOS])
-        if desired is not None:
-            rec.add_topic(topic_desired, ANGLE_DESIRED.msgtype, offered_qos=[STREAM_QOS])
-        for i in range(n):
-            stamp = int(stamps_ns[i])
-            rec.write(
-                topic_command,
-                fluid_pressure_cdr(stamp, command[i], ambient_pa=ambient_pa, frame_id="valve"),
-                stamp,
-                stamp,
-            )
-            rec.write(
-                topic_measured,
-                fluid_pressure_cdr(
-                    stamp, measured[i], ambient_pa=ambient_pa, frame_id="pressure_transmitter"
-                ),
-                stamp,
-                stamp,
-            )
-            rec.write(topic_angle, joint_state_cdr(stamp, angle[i]), stamp, stamp)
-            if distance is not None:
-                rec.write(
-                    topic_distance,
-                    range_cdr(stamp, distance[i], min_range_m=min_range_m, max_range_m=max_range_m),
-                    stamp,
-                    stamp,
-                )
-            if desired is not None:
-                rec.write(topic_desired, joint_state_cdr(stamp, desired[i]), stamp, stamp)
-    return Path(path)
