@@ -1,4 +1,4 @@
-"""Tests of the hysteresis kernels (catheter_models.hysteresis.operators).
+"""Tests of the hysteresis kernels (catheter_models.hysteresis: operators, inverse, GPI, loss).
 
 Identities that hold by the thesis's definitions (eqs. 5.2, 5.5, 9.7-9.21), checked on the
 compiled kernels, and the promise that a stream (one-sample chunks) equals the batch run.
@@ -13,7 +13,10 @@ import numpy.typing as npt
 import pytest
 
 from catheter_models.errors import ParameterError
+from catheter_models.hysteresis import gpi_kernels
 from catheter_models.hysteresis import operators as op
+from catheter_models.hysteresis.inverse import invert_chain, invert_deadband, invert_pi
+from catheter_models.hysteresis.population import MONOTONE_PENALTY, drdpi_population_loss
 
 FloatArray = npt.NDArray[np.float64]
 RATE_HZ = 250.0
@@ -83,7 +86,7 @@ def test_deadband_sum_is_zero_at_zero_and_its_inverse_undoes_it() -> None:
     d = np.array([-4.0, -2.0, 0.0, 3.0, 6.0])
     g = np.array([0.3, 0.2, 0.1, 1.5, 0.4])
     assert op.deadband_sum(0.0, d, g) == 0.0
-    b, q = op.invert_deadband(d, g)
+    b, q = invert_deadband(d, g)
     y = np.linspace(-10.0, 15.0, 501)
     z = np.empty_like(y)
     op.deadband_sum_array(y, d, g, z)
@@ -96,9 +99,9 @@ def test_deadband_sum_is_zero_at_zero_and_its_inverse_undoes_it() -> None:
 
 def test_invert_deadband_refuses_a_folding_sum() -> None:
     with pytest.raises(ParameterError, match="not invertible"):
-        op.invert_deadband(np.array([-1.0, 0.0, 1.0]), np.array([0.2, 0.5, -0.6]))
+        invert_deadband(np.array([-1.0, 0.0, 1.0]), np.array([0.2, 0.5, -0.6]))
     with pytest.raises(ParameterError, match="d_0 = 0"):
-        op.invert_deadband(np.array([-1.0, 0.5, 1.0]), np.array([0.2, 0.5, 0.6]))
+        invert_deadband(np.array([-1.0, 0.5, 1.0]), np.array([0.2, 0.5, 0.6]))
 
 
 # --- GPI envelope and the GPI ------------------------------------------------------------------
@@ -116,20 +119,22 @@ def test_envelope_inverse_undoes_envelope_and_saturates_finite() -> None:
 
 def test_inverse_gpi_composed_with_gpi_is_the_identity_on_a_signal() -> None:
     theta = np.array([7.75, 0.6, -0.97, 5.04, 1.1, 9.9, 1.27, 1.75])  # Table 9.3's values
-    coef = op.gpi_coefficients(theta, 10)
-    inverse = op.invert_gpi(coef)
+    coef = gpi_kernels.gpi_coefficients(theta, 10)
+    inverse = gpi_kernels.invert_gpi(coef)
     x = _descending_sine(1.5, 0.4)
     y = np.empty_like(x)
-    op.gpi_run(x, coef, op.gpi_rest_state(coef), y)
+    gpi_kernels.gpi_run(x, coef, gpi_kernels.gpi_rest_state(coef), y)
     back = np.empty_like(x)
-    op.gpi_inverse_run(y, inverse, op.gpi_inverse_rest_state(coef), back)
+    gpi_kernels.gpi_inverse_run(y, inverse, gpi_kernels.gpi_inverse_rest_state(coef), back)
     np.testing.assert_allclose(back, x, atol=1e-9)
     # eq. 9.20 (q' = 1/q) and the telescoping sum: q' + sum p'_i = 1 / (q + sum p_i)
-    n = int(coef[op.G_N])
-    p = coef[op.G_HEADER + n :]
-    p_inv = inverse[op.G_HEADER + n :]
-    assert inverse[op.G_INPUT_WEIGHT] == pytest.approx(1.0 / theta[7])
-    assert inverse[op.G_INPUT_WEIGHT] + p_inv.sum() == pytest.approx(1.0 / (theta[7] + p.sum()))
+    n = int(coef[gpi_kernels.G_N])
+    p = coef[gpi_kernels.G_HEADER + n :]
+    p_inv = inverse[gpi_kernels.G_HEADER + n :]
+    assert inverse[gpi_kernels.G_INPUT_WEIGHT] == pytest.approx(1.0 / theta[7])
+    assert inverse[gpi_kernels.G_INPUT_WEIGHT] + p_inv.sum() == pytest.approx(
+        1.0 / (theta[7] + p.sum())
+    )
 
 
 # --- the DRDPI chain -----------------------------------------------------------------------------
@@ -142,20 +147,20 @@ def test_analytic_inverse_of_a_rate_independent_drdpi_is_exact() -> None:
     parts = op.unpack_chain(coef)
     # the knees at dp and 2 dp (y = 6, 12) are both crossed
     assert y.max() > op.deadband_sum(12.0, parts["post_thresholds"], parts["post_weights"])
-    np.testing.assert_allclose(_run_chain(op.invert_chain(coef), y), x, atol=1e-12)
+    np.testing.assert_allclose(_run_chain(invert_chain(coef), y), x, atol=1e-12)
 
 
 def test_analytic_inverse_of_a_rate_dependent_drdpi_is_close_on_a_slow_signal() -> None:
     coef = op.drdpi_coefficients(_theta(beta=0.02), 10, 3, RATE_HZ, 0.2)
     x = _descending_sine(1.4, 0.1, seconds=20.0)
-    back = _run_chain(op.invert_chain(coef), _run_chain(coef, x))
+    back = _run_chain(invert_chain(coef), _run_chain(coef, x))
     # the rate term is at most 0.02 s * 1 bar/s: the inverse's rate estimate errs by less
     assert np.max(np.abs(back - x)) < 0.01
 
 
 def test_inverse_pi_weights_eq_9_6_and_thresholds_eq_9_3_9_4() -> None:
     w0, w = 2.0, np.array([1.0, 0.5, 0.25])
-    c0, c, m = op.invert_pi(w0, w)
+    c0, c, m = invert_pi(w0, w)
     assert c0 == 0.5
     np.testing.assert_allclose(c, [-1.0 / (3.0 * 2.0), -0.5 / (3.5 * 3.0), -0.25 / (3.75 * 3.5)])
     r = np.array([0.1, 0.2, 0.3])
@@ -164,14 +169,14 @@ def test_inverse_pi_weights_eq_9_6_and_thresholds_eq_9_3_9_4() -> None:
     for i in range(2):  # eq. 9.4
         assert rho[i + 1] == pytest.approx(rho[i] + (w0 + w[: i + 1].sum()) * (r[i + 1] - r[i]))
     with pytest.raises(ParameterError, match="not invertible"):
-        op.invert_pi(1.0, np.array([-0.5, -0.6]))
+        invert_pi(1.0, np.array([-0.5, -0.6]))
 
 
 def test_stream_in_one_sample_chunks_equals_batch_bitwise() -> None:
     x = _descending_sine(1.5, 0.6)
     for coef in (
         op.drdpi_coefficients(_theta(), 10, 3, RATE_HZ, 0.2),
-        op.invert_chain(op.drdpi_coefficients(_theta(), 10, 3, RATE_HZ, 0.2)),
+        invert_chain(op.drdpi_coefficients(_theta(), 10, 3, RATE_HZ, 0.2)),
     ):
         batch = _run_chain(coef, x)
         state = np.zeros(op.chain_state_size(coef))
@@ -182,13 +187,13 @@ def test_stream_in_one_sample_chunks_equals_batch_bitwise() -> None:
             op.chain_run(one, coef, state, out)
             streamed[k] = out[0]
         np.testing.assert_array_equal(streamed, batch)
-    gpi = op.gpi_coefficients(np.array([10.0, 1.2, -2.0, 8.0, 1.0, 3.0, 1.3, 0.4]), 8)
+    gpi = gpi_kernels.gpi_coefficients(np.array([10.0, 1.2, -2.0, 8.0, 1.0, 3.0, 1.3, 0.4]), 8)
     batch = np.empty_like(x)
-    op.gpi_run(x, gpi, op.gpi_rest_state(gpi), batch)
-    state = op.gpi_rest_state(gpi)
+    gpi_kernels.gpi_run(x, gpi, gpi_kernels.gpi_rest_state(gpi), batch)
+    state = gpi_kernels.gpi_rest_state(gpi)
     halves = [np.empty(600), np.empty(x.size - 600)]
-    op.gpi_run(x[:600], gpi, state, halves[0])
-    op.gpi_run(x[600:], gpi, state, halves[1])
+    gpi_kernels.gpi_run(x[:600], gpi, state, halves[0])
+    gpi_kernels.gpi_run(x[600:], gpi, state, halves[1])
     np.testing.assert_array_equal(np.concatenate(halves), batch)
 
 
@@ -200,7 +205,7 @@ def test_population_loss_is_eq_5_12_of_the_same_chain() -> None:
     ys = [_run_chain(coef, x) + rng.normal(0, 0.1, x.size) for x in xs]
     starts = np.array([0, xs[0].size, xs[0].size + xs[1].size], dtype=np.int64)
     thetas = np.stack([truth, truth * 1.05])
-    losses = op.drdpi_population_loss(
+    losses = drdpi_population_loss(
         thetas, 10, 3, RATE_HZ, 0.2, False, np.concatenate(xs), np.concatenate(ys), starts
     )
     for theta, loss in zip(thetas, losses, strict=True):
@@ -211,7 +216,7 @@ def test_population_loss_is_eq_5_12_of_the_same_chain() -> None:
     # a chain that is not increasing is scored by the penalty, not run
     folded = truth.copy()
     folded[1] = 50.0  # g_1 = -50 e^{-0.8}: Z folds back
-    bad = op.drdpi_population_loss(
+    bad = drdpi_population_loss(
         folded[None, :], 10, 3, RATE_HZ, 0.2, False, np.concatenate(xs), np.concatenate(ys), starts
     )
-    assert bad[0] >= op.MONOTONE_PENALTY
+    assert bad[0] >= MONOTONE_PENALTY

@@ -57,6 +57,8 @@ import numpy.typing as npt
 from catheter_models.contract import SENSOR_RATE_HZ
 from catheter_models.errors import ParameterError
 from catheter_models.hysteresis import operators as op
+from catheter_models.hysteresis.inverse import invert_chain, invert_chain_kernel
+from catheter_models.hysteresis.population import MONOTONE_PENALTY, drdpi_population_loss
 from catheter_models.model_dir import Manifest
 from catheter_models.models.base import (
     DataRequirement,
@@ -297,7 +299,7 @@ def chain_coefficients(
         n_deadband: k; 2k + 1 deadband operators.
         rate_hz: Sample rate the chain runs at [Hz].
         rate_filter_s: Time constant of the rate estimate's low-pass [s]; 0 for none.
-        inverse: Return E⁻¹ (eqs. 9.2-9.11, :func:`operators.invert_chain`) instead of E.
+        inverse: Return E⁻¹ (eqs. 9.2-9.11, :func:`inverse.invert_chain`) instead of E.
 
     Returns:
         Coefficient vector for :func:`operators.chain_run`.
@@ -306,7 +308,7 @@ def chain_coefficients(
     coef: FloatArray = op.drdpi_coefficients(
         params.as_array(), n_play, n_deadband, float(rate_hz), rate_alpha(rate_filter_s, rate_hz)
     )
-    return op.invert_chain(coef) if inverse else coef
+    return invert_chain(coef) if inverse else coef
 
 
 def run_chain(coef: FloatArray, x: FloatArray) -> FloatArray:
@@ -390,7 +392,7 @@ class DRDPIProblem:
 
     def population_loss(self, thetas: FloatArray) -> FloatArray:
         """Eq. 5.12 for each row of ``thetas`` (search coordinates; numba, in parallel)."""
-        loss: FloatArray = op.drdpi_population_loss(
+        loss: FloatArray = drdpi_population_loss(
             search_to_params(np.atleast_2d(thetas)),
             self.n_play,
             self.n_deadband,
@@ -411,7 +413,7 @@ class DRDPIProblem:
         """
         coef = op.drdpi_coefficients(theta, self.n_play, self.n_deadband, self.rate_hz, self.alpha)
         if self.inverse:
-            coef = op.invert_chain_kernel(coef)
+            coef = invert_chain_kernel(coef)
         out = np.empty(self.x.size)
         state = np.zeros(op.chain_state_size(coef))
         for s in range(self.starts.size - 1):
@@ -432,7 +434,7 @@ class DRDPIProblem:
         theta = search_to_params(search)
         margin = float(op.drdpi_monotone_margin(theta, self.n_play, self.n_deadband))
         if not margin > 0.0:
-            scale = math.sqrt(op.MONOTONE_PENALTY * (1.0 - margin) / (self.starts.size - 1))
+            scale = math.sqrt(MONOTONE_PENALTY * (1.0 - margin) / (self.starts.size - 1))
             penalty: FloatArray = np.full(self.x.size, scale) * self._weights
             return penalty
         res: FloatArray = (self.predict_all(theta) - self.y) * self._weights

@@ -28,7 +28,8 @@ import numpy.typing as npt
 
 from catheter_models.contract import SENSOR_RATE_HZ
 from catheter_models.errors import ParameterError
-from catheter_models.hysteresis import operators as op
+from catheter_models.hysteresis import gpi_kernels
+from catheter_models.hysteresis.population import gpi_population_loss
 from catheter_models.model_dir import Manifest
 from catheter_models.models.base import (
     DataRequirement,
@@ -149,23 +150,25 @@ GPI_FILE: Final = ParamsFile(GPI_PARAMS_FILE, GPI_PARAMS_FORMAT, GPIParams)
 
 
 def gpi_coefficients(params: GPIParams, n_play: int) -> FloatArray:
-    """Forward coefficients (``operators.G_*`` layout) of a GPI with ``n_play`` plays."""
-    coef: FloatArray = op.gpi_coefficients(params.as_array(), n_play)
+    """Forward coefficients (``gpi_kernels.G_*`` layout) of a GPI with ``n_play`` plays."""
+    coef: FloatArray = gpi_kernels.gpi_coefficients(params.as_array(), n_play)
     return coef
 
 
 def run_gpi(coef: FloatArray, x_bar: FloatArray) -> FloatArray:
     """Forward GPI over a whole signal from rest: bar in, deg out."""
     out = np.empty(x_bar.size)
-    op.gpi_run(np.ascontiguousarray(x_bar, dtype=np.float64), coef, op.gpi_rest_state(coef), out)
+    gpi_kernels.gpi_run(
+        np.ascontiguousarray(x_bar, dtype=np.float64), coef, gpi_kernels.gpi_rest_state(coef), out
+    )
     return out
 
 
 def run_inverse_gpi(coef: FloatArray, inverse: FloatArray, y_deg: FloatArray) -> FloatArray:
     """Inverse GPI (eqs. 9.17-9.21) over a whole signal from rest: deg in, bar out."""
     out = np.empty(y_deg.size)
-    state = op.gpi_inverse_rest_state(coef)
-    op.gpi_inverse_run(np.ascontiguousarray(y_deg, dtype=np.float64), inverse, state, out)
+    state = gpi_kernels.gpi_inverse_rest_state(coef)
+    gpi_kernels.gpi_inverse_run(np.ascontiguousarray(y_deg, dtype=np.float64), inverse, state, out)
     return out
 
 
@@ -181,7 +184,7 @@ class GPIProblem:
 
     def population_loss(self, thetas: FloatArray) -> FloatArray:
         """Eq. 5.12 for each row of ``thetas`` (search coordinates; numba, in parallel)."""
-        loss: FloatArray = op.gpi_population_loss(
+        loss: FloatArray = gpi_population_loss(
             gpi_search_to_params(np.atleast_2d(thetas)),
             self.n_play,
             self.x,
@@ -196,11 +199,11 @@ class GPIProblem:
         Args:
             theta: Table 9.1's parameters (not search coordinates).
         """
-        coef = op.gpi_coefficients(np.asarray(theta, dtype=np.float64), self.n_play)
+        coef = gpi_kernels.gpi_coefficients(np.asarray(theta, dtype=np.float64), self.n_play)
         out = np.empty(self.x.size)
         for s in range(self.starts.size - 1):
             lo, hi = int(self.starts[s]), int(self.starts[s + 1])
-            op.gpi_run(self.x[lo:hi], coef, op.gpi_rest_state(coef), out[lo:hi])
+            gpi_kernels.gpi_run(self.x[lo:hi], coef, gpi_kernels.gpi_rest_state(coef), out[lo:hi])
         return out
 
     def residuals(self, search: FloatArray) -> FloatArray:
@@ -219,16 +222,16 @@ class _GPIStream:
 
     def __init__(self, coef: FloatArray) -> None:
         self._coef = coef
-        self._state = op.gpi_rest_state(coef)
+        self._state = gpi_kernels.gpi_rest_state(coef)
         self._x = np.zeros(1)
         self._y = np.zeros(1)
 
     def reset(self) -> None:
-        self._state[:] = op.gpi_rest_state(self._coef)
+        self._state[:] = gpi_kernels.gpi_rest_state(self._coef)
 
     def step(self, value: float) -> float:
         self._x[0] = pa_to_bar(check_finite_step(value, "gpi"))
-        op.gpi_run(self._x, self._coef, self._state, self._y)
+        gpi_kernels.gpi_run(self._x, self._coef, self._state, self._y)
         return float(deg_to_rad(float(self._y[0])))
 
 
@@ -241,18 +244,18 @@ class InverseGPIStream:
     def __init__(self, coef: FloatArray, inverse: FloatArray) -> None:
         self._coef = coef
         self._inverse = inverse
-        self._state = op.gpi_inverse_rest_state(coef)
+        self._state = gpi_kernels.gpi_inverse_rest_state(coef)
         self._y = np.zeros(1)
         self._x = np.zeros(1)
 
     def reset(self) -> None:
         """Back to rest: the inverse's plays at the forward model's output at rest."""
-        self._state[:] = op.gpi_inverse_rest_state(self._coef)
+        self._state[:] = gpi_kernels.gpi_inverse_rest_state(self._coef)
 
     def step(self, value: float) -> float:
         """Desired angle [rad] -> pressure [Pa gauge]; finite by construction (γ⁻¹ saturates)."""
         self._y[0] = rad_to_deg(check_finite_step(value, "inverse gpi"))
-        op.gpi_inverse_run(self._y, self._inverse, self._state, self._x)
+        gpi_kernels.gpi_inverse_run(self._y, self._inverse, self._state, self._x)
         return float(bar_to_pa(float(self._x[0])))
 
 
@@ -323,7 +326,7 @@ class GPI(Model):
 
     def _set_params(self, params: GPIParams, rate_hz: float) -> None:
         coef = gpi_coefficients(params, self.n_play)
-        self.inverse_coef_ = op.invert_gpi(coef)
+        self.inverse_coef_ = gpi_kernels.invert_gpi(coef)
         self.coef_ = coef
         self.params_ = params
         self.rate_hz_ = float(rate_hz)

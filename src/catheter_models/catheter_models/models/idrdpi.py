@@ -11,7 +11,7 @@ run by the shared kernels (:func:`catheter_models.hysteresis.operators.chain_run
     (thresholds 9.3-9.4, weights 9.6). The inverse's thresholds need the pressure rate
     (eq. 5.6), which the inverse does not know before it has computed the pressure; it uses
     the rate of its own PI-stage input ``v = Z⁻¹(desired)`` divided by the PI's major-loop
-    slope ``a0 + sum a_i`` (see :func:`operators.invert_chain`). That is causal, the same in
+    slope ``a0 + sum a_i`` (see :func:`inverse.invert_chain`). That is causal, the same in
     batch and stream, and exact for slow signals (the rate term vanishes).
 ``"gpi"`` (sec. 9.2, the thesis's optimisation route)
     Group the recordings by excitation frequency (by the ``_f<Hz>`` tag in their names when

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from catheter_models.errors import ParameterError
-from catheter_models.hysteresis import operators as op
+from catheter_models.hysteresis import gpi_kernels
 from catheter_models.models.base import ModelError
 from catheter_models.models.cores.base import (
     FloatArray,
@@ -70,11 +70,11 @@ class GPICore(_ThesisCore):
         if self.params is None:
             raise ModelError("gpi core is not fitted")
         coef = self._coef(self.params)
-        state, sample, out = op.gpi_rest_state(coef), np.zeros(1), np.zeros(1)
+        state, sample, out = gpi_kernels.gpi_rest_state(coef), np.zeros(1), np.zeros(1)
 
         def step(x: float) -> float:
             sample[0] = x
-            op.gpi_run(sample, coef, state, out)
+            gpi_kernels.gpi_run(sample, coef, state, out)
             return float(out[0])
 
         return step
