@@ -22,7 +22,7 @@ from graph_utils import Children, Probe, node_argv, wait_for_recorder
 
 from catheter_control.bringup import sim_graph_specs
 from catheter_models.bag import load_bag
-from catheter_models.cli import _simulate_one
+from catheter_models.cli_data import _simulate_one
 from catheter_models.contract import (
     DIAGNOSTICS,
     SENSOR_RATE_HZ,

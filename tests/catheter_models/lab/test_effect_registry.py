@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from catheter_models import cli
-from catheter_models.bag.writer import write_bag_from_arrays
+from catheter_models import cli, cli_lab
+from catheter_models.bag.from_arrays import write_bag_from_arrays
 from catheter_models.lab.residuals import TEST_LABELS, TEST_NAMES
 from catheter_models.metrics import REGIMES
 from catheter_models.models.base import Recording
@@ -43,7 +43,7 @@ def test_every_plant_effect_is_in_the_core_or_has_a_block_and_none_twice() -> No
 
 
 def test_catheter_lab_effects_offers_what_add_takes(capsys: pytest.CaptureFixture[str]) -> None:
-    assert cli._cmd_effects(None) == 0  # type: ignore[arg-type]
+    assert cli_lab._cmd_effects(None) == 0  # type: ignore[arg-type]
     out = capsys.readouterr().out
     for effect in FORMS:
         assert f"catheter-lab add {effect})" in out, effect
@@ -100,7 +100,7 @@ def test_a_toy_effect_in_one_file_is_offered_fitted_and_ranked(
     train = _late(simulate_recordings(["train_zero_f0.8", "train_nonzero_f0.6"]))
     test = _late(simulate_recordings(["model_test_up_chirp"], seed0=7))
     # Offered: catheter-lab effects lists it, with the command that adds it.
-    assert cli._cmd_effects(None) == 0  # type: ignore[arg-type]
+    assert cli_lab._cmd_effects(None) == 0  # type: ignore[arg-type]
     assert f"catheter-lab add {toy.effect})" in capsys.readouterr().out
     # Fitted: catheter-lab add puts it in the chain, with the latency it was made with.
     base = GreyBox(core="free_pi").fit(train, progress=False)
