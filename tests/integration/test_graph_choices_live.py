@@ -106,6 +106,41 @@ def test_a_graph_started_without_a_look_is_refused_by_its_manager_before_any_tra
     assert not first.failed()
     assert children.log("compensator", "graph").count("compensator 'clstm' at") == 1
     assert "Unable to start transition" not in children.log("sim_hardware", "graph")
+    # The first graph winds down beside the refused one's traces (nodes that exited can show
+    # for seconds): a deactivate, this graph's ramp-down, is never refused for a twin.
+    assert first.stop(timeout_s=15.0) == {"compensator": 0, "sim_hardware": 0}
+
+
+def test_a_twin_found_late_stops_the_bring_up_but_never_the_wind_down(
+    children: Children, monkeypatch: pytest.MonkeyPatch, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """Discovery can bring another graph's node after the manager's first look (a CI run:
+    after configure). Before each configure or activate the manager looks again and refuses;
+    its deactivate (the ramp-down) goes on whatever it sees. The twin is simulated here
+    (``_twice``), so both paths run every time rather than when discovery happens to be slow.
+    """
+    from catheter_control.process_graph import ProcessGraph
+    from catheter_models.errors import GraphConflictError
+    from catheter_ros.lifecycle_client import LifecycleManager
+
+    looks: list[list[str]] = []
+
+    def twin_after_the_first_look(self: LifecycleManager, names: list[str]) -> list[str]:
+        looks.append(list(names))
+        return [] if len(looks) == 1 else list(names)
+
+    monkeypatch.setattr(LifecycleManager, "_twice", twin_after_the_first_look)
+    late = ProcessGraph(sim_graph_specs(None), "/catheter", children.log_dir / "late", children.env)
+    with pytest.raises(GraphConflictError) as refused:
+        late.start()
+    assert "found before its configure (discovery was slow)" in str(refused.value)
+    assert "configured" not in capfd.readouterr().err  # refused before the first transition
+    monkeypatch.undo()
+
+    graph = children.graph(sim_graph_specs(None))
+    monkeypatch.setattr(LifecycleManager, "_twice", lambda self, names: list(names))
+    assert graph.stop(timeout_s=15.0) == {"compensator": 0, "sim_hardware": 0}
+    assert "/catheter/compensator: deactivated" in capfd.readouterr().err
 
 
 def test_an_integer_for_the_rate_is_the_1_khz_loop_and_a_string_is_refused(

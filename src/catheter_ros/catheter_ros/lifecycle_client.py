@@ -171,8 +171,9 @@ class LifecycleManager(Node):
         """Run one transition of node ``name``; raise LifecycleError naming it and why not.
 
         Raises:
-            GraphConflictError: a node of the same name in another graph was discovered since
-                :meth:`bring_up` looked (before the transition, or as it failed).
+            GraphConflictError: (configure, activate) a node of the same name in another graph
+                was discovered since :meth:`bring_up` looked (before the transition, or as it
+                failed).
         """
         label = _LABELS[transition]
         client = self._change_state[name]
@@ -185,7 +186,11 @@ class LifecycleManager(Node):
             return bool(gone)
 
         self._wait_for_services(executor, name, label)
-        self._refuse_late_twin(name, label)
+        # Bring-up only: winding down must go on whatever else runs (a deactivate is this
+        # graph's ramp-down; a CI run's teardown was refused once a refused twin showed up).
+        bring_up = transition in (CONFIGURE, ACTIVATE)
+        if bring_up:
+            self._refuse_late_twin(name, label)
         request = ChangeState.Request()
         request.transition.id = transition
         self._status.pop(name.lstrip("/"), None)  # a status from after the answer says why
@@ -201,7 +206,8 @@ class LifecycleManager(Node):
         response: Any = future.result()
         if response is None or not response.success:
             # The answer may have come from a twin discovered only now.
-            self._refuse_late_twin(name, label)
+            if bring_up:
+                self._refuse_late_twin(name, label)
             reason = self._reason(executor, name).removeprefix(f"{label} failed: ")
             raise LifecycleError(f"{name}: {label} failed: {reason}")
         self.get_logger().info(f"{name}: {label}d")
