@@ -179,8 +179,11 @@ def _send(probe: Probe, pub: object, msg: JointTrajectory) -> None:
 def test_tip_angle_stopping_ramps_the_pressure_down_and_says_why(
     children: Children, fault: FaultRecord
 ) -> None:
+    # Not the node's 0.1 s default: beside two busy loops the relay process went quiet for
+    # 104 ms before the laser was stopped on purpose, and the run under test ended early.
+    timeout_s = 0.3
     _start_rig_and_compensator(
-        children, {"require_tip_angle": True, "sensor_timeout_s": 0.1}, relay_angle=True
+        children, {"require_tip_angle": True, "sensor_timeout_s": timeout_s}, relay_angle=True
     )
     with Probe(children.domain_id) as probe:
         relay = children.procs["angle_relay"]
@@ -232,11 +235,11 @@ def test_tip_angle_stopping_ramps_the_pressure_down_and_says_why(
             s for s in statuses(diags[n_diag:], COMPENSATOR) if s.level == DiagnosticStatus.ERROR
         )
         assert status.message.startswith("stopped: tip/angle stale: no sample for"), status.message
-        assert "(limit 100 ms); ramped down" in status.message, status.message
+        assert f"(limit {timeout_s * 1e3:.0f} ms); ramped down" in status.message, status.message
         probe.spin_for(1.0)
         after = [m for m in commands if m.mono_s > t_fault]
         ramp = gauge_pa(after)
-        # Ramped to zero at the slew limit (20 bar/s: <= 0.15 s from 3 bar, plus the 0.1 s
+        # Ramped to zero at the slew limit (20 bar/s: <= 0.15 s from 3 bar, after the
         # timeout), monotonically, then the compensator went quiet (the driver's watchdog
         # holds the valve vented).
         assert ramp.size > 0 and ramp[-1] == 0.0, ramp[-5:]
@@ -246,7 +249,7 @@ def test_tip_angle_stopping_ramps_the_pressure_down_and_says_why(
         # slew limit (8000 Pa per 4 ms tick) and never up.
         assert np.all(np.abs(ramp[: falling + 1] - ramp[0]) < 1.0e3), ramp[: falling + 1]
         assert np.all((steps[falling:] <= 1e-6) & (steps[falling:] >= -8.0e3 - 1e-6)), steps
-        assert after[-1].mono_s - t_fault < 0.5, after[-1].mono_s - t_fault
+        assert after[-1].mono_s - t_fault < timeout_s + 0.4, after[-1].mono_s - t_fault
         fault.safe_after(after[-1].mono_s - t_fault)
         fault.check("reported", status.message.startswith("stopped: tip/angle stale"))
         assert diagnostic_values(status)["state"] in {"ramping_down", "idle"}
