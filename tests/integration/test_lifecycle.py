@@ -77,7 +77,9 @@ def test_deactivating_the_compensator_mid_run_ramps_the_pressure_down(
 
     from catheter_models.contract import PRESSURE_COMMAND, TRAJECTORY
 
-    children.graph(sim_graph_specs())
+    # This test is about the deactivation, not the sensor timeout: beside two busy loops the
+    # node's 0.1 s default saw pressure/measured quiet for 104 ms and ended the run first.
+    children.graph(sim_graph_specs(compensator_params={"sensor_timeout_s": 0.5}))
     with Probe(children.domain_id) as probe:
         commands = probe.subscribe(FluidPressure, PRESSURE_COMMAND.name, qos.RECORD)
         pub = probe.node.create_publisher(JointTrajectory, TRAJECTORY.name, qos.TRAJECTORY)
