@@ -103,15 +103,9 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     from catheter_models.lab.diagnose import diagnose, plot_diagnosis
     from catheter_models.lab.residuals import plot_residual_tests
     from catheter_models.models import load_model
-    from catheter_models.models.data import recordings_from_bags
 
     model = load_model(args.model)
-    train = recordings_from_bags(
-        args.train, rate_hz=model.fitted_rate_hz, accept_implausible=args.accept_implausible
-    )
-    test = recordings_from_bags(
-        args.test, rate_hz=model.fitted_rate_hz, accept_implausible=args.accept_implausible
-    )
+    train, test = _train_and_test(args, model.fitted_rate_hz)
     result = diagnose(
         model,
         train,
@@ -149,20 +143,26 @@ def _greybox_of(model_dir: Path) -> Any:
     return chain
 
 
+def _train_and_test(args: argparse.Namespace, rate_hz: float) -> tuple[list[Any], list[Any]]:
+    """``--train`` and ``--test`` bags as recordings at the model's rate (``--test`` optional)."""
+    from catheter_models.models.data import recordings_from_bags
+
+    def read(bags: list[Path] | None) -> list[Any]:
+        return recordings_from_bags(
+            bags or [], rate_hz=rate_hz, accept_implausible=args.accept_implausible
+        )
+
+    return read(args.train), read(args.test)
+
+
 def _change(args: argparse.Namespace, change: str, make: Any) -> int:
     """Refit ``make(model)``, save it, record parent and child in the lab's history."""
     from catheter_models.lab import history
-    from catheter_models.models.data import recordings_from_bags
 
     if args.output.exists():
         raise CatheterError(f"{args.output} exists; choose a new model directory")
     model = _greybox_of(args.model)
-    train = recordings_from_bags(
-        args.train, rate_hz=model.fitted_rate_hz, accept_implausible=args.accept_implausible
-    )
-    test = recordings_from_bags(
-        args.test or [], rate_hz=model.fitted_rate_hz, accept_implausible=args.accept_implausible
-    )
+    train, test = _train_and_test(args, model.fitted_rate_hz)
     new = make(model).fit(train, progress=not args.no_progress)
     new.save(args.output, training=train)
     print(f"{' -> '.join(new.chain)}: {new.block_values() or new.core_name}")
@@ -195,17 +195,11 @@ def _cmd_explain(args: argparse.Namespace) -> int:
     from catheter_models.lab.diagnose import plot_diagnosis
     from catheter_models.lab.explain import Step, explain
     from catheter_models.models import load_model
-    from catheter_models.models.data import recordings_from_bags
 
     if args.output.exists():
         raise CatheterError(f"{args.output} exists; choose a new directory")
     model = load_model(args.model)
-    train = recordings_from_bags(
-        args.train, rate_hz=model.fitted_rate_hz, accept_implausible=args.accept_implausible
-    )
-    test = recordings_from_bags(
-        args.test, rate_hz=model.fitted_rate_hz, accept_implausible=args.accept_implausible
-    )
+    train, test = _train_and_test(args, model.fitted_rate_hz)
     args.output.mkdir(parents=True)
     parent: list[int | None] = [None]
 
