@@ -45,9 +45,11 @@ CHILD = textwrap.dedent(
     ):
         importlib.import_module(module)
 
-    from catheter_control.models import COMPENSATORS, load_compensator
+    from catheter_control.models import SHIPPED, load_compensator
 
-    for kind in COMPENSATORS:
+    # The grey box's inverse is a user's model (none shipped): its modules load here too.
+    importlib.import_module("catheter_models.models.greybox_inverse")
+    for kind in SHIPPED:
         compensator = load_compensator(kind, "")
         command_pa = compensator.step(math.radians(5.0))
         if not math.isfinite(command_pa):

@@ -57,7 +57,7 @@ def test_the_shipped_c_lstm_follows_each_thesis_trajectory(name: str) -> None:
 
 def test_the_default_is_the_c_lstm() -> None:
     assert DEFAULT_COMPENSATOR == "clstm"
-    assert set(COMPENSATORS) == {"none", "idrdpi", "clstm"}
+    assert set(COMPENSATORS) == {"none", "idrdpi", "clstm", "greybox"}
 
 
 def test_the_shipped_c_lstm_in_a_1_khz_loop_is_stepped_at_250_hz() -> None:

@@ -110,7 +110,7 @@ def start_local_graph(
         "signal_params": repr(signal_params),
         "hardware": hardware,
         "compensator": args.compensator,
-        "model_dir": args.model_dir or f"shipped ({SHIPPED[args.compensator]})",
+        "model_dir": args.model_dir or f"shipped ({SHIPPED.get(args.compensator, 'none')})",
         "feedback": args.feedback,
         "feedback_gains": args.feedback_gains or "beside the model (or shipped)",
         "feedforward_shaping": args.feedforward_shaping,

@@ -3,7 +3,9 @@
 ``none`` is the static inverse of the quasi-static curve (no hysteresis compensation), the
 baseline. ``idrdpi`` and ``clstm`` are the thesis's compensators: any inverse model
 directory written by ``catheter-lab train`` (hash-checked on load); the c-LSTM runs on ONNX
-Runtime, so the node never imports torch.
+Runtime, so the node never imports torch. ``greybox`` is the lab's explained model run
+backwards (:mod:`catheter_models.models.greybox_inverse`): the model directory that
+``catheter-lab explain``, ``add`` or ``core`` wrote; no model of it is shipped.
 """
 
 from __future__ import annotations
@@ -12,27 +14,34 @@ from importlib import resources
 from pathlib import Path
 
 from catheter_control.control_core import StaticInverseCompensator, StreamingCompensator
-from catheter_models.contract import CONTROL_RATE_HZ
+from catheter_models.contract import CONTROL_RATE_HZ, MAX_PRESSURE_PA
 from catheter_models.errors import ParameterError
 from catheter_models.feedback import GAINS_FILE, FeedbackGains, PIDFeedback
 from catheter_models.models.base import Stream
 from catheter_models.shaping import SHAPERS, InputShaper, ShaperStream
 from catheter_models.static_map import StaticMap
 
-COMPENSATORS = ("none", "idrdpi", "clstm")
+COMPENSATORS = ("none", "idrdpi", "clstm", "greybox")
 DEFAULT_COMPENSATOR = "clstm"
 """The thesis's best compensator (Tables 11.1-11.4), and ours on the simulated rig."""
 SHIPPED = {"none": "static_map", "idrdpi": "idrdpi", "clstm": "clstm"}
-"""The model directory shipped for each compensator (fitted on the simulated rig)."""
+"""The model directory shipped for each compensator (fitted on the simulated rig); a grey box
+is the user's own catheter explained, so none is shipped for ``greybox``."""
 FEEDBACKS = ("none", "pi")
 """Feedback on the measured bend the node can run beside its compensator."""
 SHIPPED_GAINS = "feedback"
 """Directory of the shipped feedback gains (tuned on the simulated rig's recorded steps)."""
 
 
-COMPENSATOR_OF_KIND = {"static_map": "none", "idrdpi": "idrdpi", "clstm": "clstm"}
+COMPENSATOR_OF_KIND = {
+    "static_map": "none",
+    "idrdpi": "idrdpi",
+    "clstm": "clstm",
+    "greybox": "greybox",
+}
 """Model kinds (a manifest's ``kind``) that are compensators, and the compensator each runs as:
-the inverse models, and the quasi-static curve whose inverse ``none`` is."""
+the inverse models, the quasi-static curve whose inverse ``none`` is, and the lab's grey box
+whose inverse ``greybox`` is."""
 
 
 def compensator_of_model_dir(model_dir: str) -> str:
@@ -197,6 +206,8 @@ def load_compensator(kind: str, model_dir: str) -> StreamingCompensator:
     """
     if kind not in COMPENSATORS:
         raise ParameterError(f"unknown compensator {kind!r}; available: {', '.join(COMPENSATORS)}")
+    if kind == "greybox":
+        return load_greybox(model_dir)
     path = Path(model_dir) if model_dir else shipped_model_dir(SHIPPED[kind])
     if kind == "none":
         return StaticInverseCompensator(StaticMap.load(path))
@@ -208,6 +219,33 @@ def load_compensator(kind: str, model_dir: str) -> StreamingCompensator:
     rate_hz = model.fitted_rate_hz
     return ModelCompensator(
         model.stream(), model.preview_samples / rate_hz, 1.0 / rate_hz, f"{kind} ({path})"
+    )
+
+
+def load_greybox(model_dir: str, max_pressure_pa: float = MAX_PRESSURE_PA) -> ModelCompensator:
+    """The grey box in ``model_dir`` run backwards, reading the plan as far ahead as it needs.
+
+    Raises:
+        ParameterError: no model directory (none is shipped), a model that is not a grey box,
+            a block without an inverse, or a core whose fitted law is not invertible sample
+            by sample (each named, with the number).
+        ModelDirError: the directory is missing, malformed, or fails its hash check.
+    """
+    if not model_dir:
+        raise ParameterError(
+            "compensator 'greybox' needs the model directory that catheter-lab explain, add "
+            "or core wrote (model_dir): no grey box is shipped, it is your catheter's own"
+        )
+    from catheter_models.models.greybox import GreyBox
+    from catheter_models.models.greybox_inverse import GreyBoxInverse
+
+    model = GreyBox.load(Path(model_dir))
+    inverse = GreyBoxInverse(model, max_pressure_pa=max_pressure_pa)
+    return ModelCompensator(
+        inverse,
+        inverse.preview_s,
+        inverse.sample_period_s,
+        f"greybox {' -> '.join(inverse.chain)} ({model_dir})",
     )
 
 

@@ -136,6 +136,14 @@ class Block(ABC):
         """
         return []
 
+    def inverse(self, rate_hz: float, values: Sequence[float]) -> Inverse:
+        """The block run backwards, one sample a tick (:class:`Inverse`), for a compensator.
+
+        A block without one cannot be compensated: the grey box's compensator refuses a
+        chain that holds it, naming it (NotImplementedError here).
+        """
+        raise NotImplementedError(f"{self.effect} has no inverse")
+
     def apply_columns(
         self, m: FloatArray, rate_hz: float, values: Sequence[float], reference: FloatArray
     ) -> FloatArray:
@@ -177,6 +185,63 @@ class Block(ABC):
         if unknown:
             raise ParameterError(f"{cls.effect} has no parameter(s) {sorted(unknown)}")
         return out
+
+
+class Inverse:
+    """One stage of the chain run backwards, one sample a tick.
+
+    The compensator (:class:`~catheter_models.models.greybox_inverse.GreyBoxInverse`) asks
+    every stage, from the bend back to the valve, for the input that gives the output it
+    wants (:meth:`want`), bounds the valve's command, then runs the stages forward on what
+    the valve will really get (:meth:`take`), so each stage's state is the plant's as the
+    model sees it, also where a bound held the command back. This base is the identity: a
+    stage that only reads the plan ahead (a delay) sets :attr:`preview_s` and nothing else.
+    """
+
+    preview_s: float = 0.0
+    """How far ahead of the bend this stage reads the plan [s] (a delay's delay; a stage that
+    needs the plan's next samples, their time)."""
+
+    def want(self, target: float) -> float:
+        """The input that makes this stage's next output ``target``."""
+        return target
+
+    def take(self, value: float) -> float:
+        """Advance on the input ``value`` really applied; this stage's output."""
+        return value
+
+
+class LagMixInverse(Inverse):
+    """The inverse of ``(1 - fraction) x + fraction * mean_k lag_k(x)`` (:func:`_lagged`).
+
+    Each lag's next state is ``a s + (1 - a) x``, affine in this sample's ``x``, so the input
+    that gives ``y`` is exact and causal:
+    ``x = (y - share * sum a s) / ((1 - fraction) + share * sum (1 - a))``. A mix of lags
+    has no zeros outside the unit circle (its inverse is a stable lead): nothing rings.
+    """
+
+    def __init__(self, rate_hz: float, time_constants_s: Sequence[float], fraction: float) -> None:
+        self._poles = [math.exp(-1.0 / (rate_hz * tau)) for tau in time_constants_s]
+        self._share = fraction / len(self._poles)
+        self._direct = (1.0 - fraction) + self._share * sum(1.0 - a for a in self._poles)
+        self._state: list[float] = []
+
+    def want(self, target: float) -> float:
+        """The input that makes the mix ``target`` now (``target`` itself at rest)."""
+        if not self._state:
+            return target
+        held = self._share * sum(a * s for a, s in zip(self._poles, self._state, strict=True))
+        return (target - held) / self._direct
+
+    def take(self, value: float) -> float:
+        """The lags advanced on ``value``; the mix."""
+        if not self._state:
+            self._state = [value] * len(self._poles)
+            return value
+        pairs = zip(self._poles, self._state, strict=True)
+        self._state = [a * s + (1.0 - a) * value for a, s in pairs]
+        share = (1.0 - self._share * len(self._poles)) * value
+        return share + self._share * sum(self._state)
 
 
 def _lowpass1(x: FloatArray, rate_hz: float, time_constant_s: float) -> FloatArray:

@@ -13,6 +13,8 @@ from catheter_models.models.blocks.base import (
     Block,
     BlockParam,
     FloatArray,
+    Inverse,
+    LagMixInverse,
     Side,
     Step,
     _lagged,
@@ -53,6 +55,10 @@ class OutputLag(Block):
         """The lag, one sample at a time."""
         return _Lowpass1Stream(rate_hz, values[0]).step
 
+    def inverse(self, rate_hz: float, values: Sequence[float]) -> Inverse:
+        """The bend before the lag that gives the bend wanted now (exact, causal)."""
+        return LagMixInverse(rate_hz, (values[0],), 1.0)
+
 
 class SlowFill(Block):
     """A share of the pressure through a slow lag, before the core: not in the catalogue.
@@ -86,3 +92,8 @@ class SlowFill(Block):
         fraction, tau = values
         lag = _Lowpass1Stream(rate_hz, tau).step
         return lambda x: (1.0 - fraction) * x + fraction * lag(x)
+
+    def inverse(self, rate_hz: float, values: Sequence[float]) -> Inverse:
+        """The pressure whose slow share fills to the pressure wanted now (exact, causal)."""
+        fraction, tau = values
+        return LagMixInverse(rate_hz, (tau,), fraction)

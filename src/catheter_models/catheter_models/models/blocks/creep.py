@@ -15,6 +15,8 @@ from catheter_models.models.blocks.base import (
     Block,
     BlockParam,
     FloatArray,
+    Inverse,
+    LagMixInverse,
     Side,
     Step,
     _lagged,
@@ -82,6 +84,11 @@ class Creep(Block):
         lag_fast = _Lowpass1Stream(rate_hz, fast).step
         lag_slow = _Lowpass1Stream(rate_hz, slow).step
         return lambda x: (1.0 - fraction) * x + fraction * 0.5 * (lag_fast(x) + lag_slow(x))
+
+    def inverse(self, rate_hz: float, values: Sequence[float]) -> Inverse:
+        """The core's bend that, with its creep, is the bend wanted now (exact, causal)."""
+        fraction, fast, slow = self._branches(values)
+        return LagMixInverse(rate_hz, (fast, slow), fraction)
 
     def excitation_problem(self, inputs: Sequence[FloatArray], rate_hz: float) -> str:
         """Creep shows only where the pressure holds still after a change."""

@@ -15,6 +15,7 @@ from catheter_models.models.blocks.base import (
     Block,
     BlockParam,
     FloatArray,
+    Inverse,
     Side,
     Step,
 )
@@ -99,6 +100,32 @@ class Drift(Block):
             return x + rate_deg_s * (t - t * t / (2.0 * settle_s))
 
         return step
+
+    def inverse(self, rate_hz: float, values: Sequence[float]) -> Inverse:
+        """The drift taken off the bend wanted, counted from the run's first sample."""
+        return _DriftInverse(rate_hz, values)
+
+
+class _DriftInverse(Inverse):
+    """:meth:`Drift.streamer` backwards: the offset it will add now, subtracted."""
+
+    def __init__(self, rate_hz: float, values: Sequence[float]) -> None:
+        self._rate_hz, self._values = rate_hz, values
+        self._count = 0
+
+    def _offset_deg(self) -> float:
+        t = np.array([self._count / self._rate_hz])
+        return float(Drift.offset_deg(t, self._values)[0])
+
+    def want(self, target: float) -> float:
+        """The bend before the drift."""
+        return target - self._offset_deg()
+
+    def take(self, value: float) -> float:
+        """The bend with the drift; the clock advances."""
+        out = value + self._offset_deg()
+        self._count += 1
+        return out
 
     def excitation_problem(self, inputs: Sequence[FloatArray], rate_hz: float) -> str:
         """A trend needs time to tell apart from the hysteresis."""

@@ -17,6 +17,7 @@ from catheter_models.models.blocks.base import (
     Block,
     BlockParam,
     FloatArray,
+    Inverse,
     Side,
     Step,
     _lowpass1,
@@ -140,3 +141,44 @@ class PneumaticLag(Block):
             return state[0]
 
         return step
+
+    def inverse(self, rate_hz: float, values: Sequence[float]) -> Inverse:
+        """The valve command that fills (or vents) the muscle to the pressure wanted."""
+        return _LagInverse(*self._terms(rate_hz, values))
+
+
+class _LagInverse(Inverse):
+    """:meth:`PneumaticLag.streamer` backwards: exact, one sample a tick, no preview.
+
+    A sample's step ``a (u - p)`` is linear in the command ``u``, so ``u = p + (want - p) / a``
+    gives the pressure wanted now. Where that step is beyond the valve's flow limit the
+    command asks for the limit's step only (the least overdrive that gets there as fast),
+    and the compensator's clamp bounds the rest: a step in the plan becomes the valve fully
+    open for as long as filling takes, then the set-point, never an unbounded spike. The
+    state follows the command really sent (:meth:`take`), so after a clamp the next sample
+    asks for what is still missing.
+    """
+
+    def __init__(self, dt_s: float, fill_s: float, vent_s: float, max_step: float) -> None:
+        self._a_fill = 1.0 - math.exp(-dt_s / fill_s)
+        self._a_vent = 1.0 - math.exp(-dt_s / vent_s)
+        self._max_step = max_step
+        self._p: float | None = None
+
+    def want(self, target: float) -> float:
+        """The command whose step reaches ``target`` (or the flow limit's step towards it)."""
+        p = self._p
+        if p is None:
+            return target
+        step = min(max(target - p, -self._max_step), self._max_step)
+        return p + step / (self._a_fill if step >= 0.0 else self._a_vent)
+
+    def take(self, value: float) -> float:
+        """The muscle's pressure after the command ``value``."""
+        if self._p is None:
+            self._p = value
+            return value
+        err = value - self._p
+        dp = err * self._a_fill if err >= 0.0 else err * self._a_vent
+        self._p += min(max(dp, -self._max_step), self._max_step)
+        return self._p

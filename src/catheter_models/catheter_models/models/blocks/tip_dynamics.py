@@ -17,6 +17,7 @@ from catheter_models.models.blocks.base import (
     Block,
     BlockParam,
     FloatArray,
+    Inverse,
     Side,
     Step,
     _band_power_fraction,
@@ -175,6 +176,10 @@ class TipDynamics(Block):
 
         return step
 
+    def inverse(self, rate_hz: float, values: Sequence[float]) -> Inverse:
+        """The bend to pull the tip towards so that it follows the plan without ringing."""
+        return _TipInverse(rate_hz, values, self.streamer(rate_hz, values))
+
     @staticmethod
     def _settings(
         rate_hz: float, values: Sequence[float]
@@ -193,3 +198,46 @@ class TipDynamics(Block):
                 "tip dynamics need fast steps or ramps"
             )
         return ""
+
+
+class _TipInverse(Inverse):
+    """The tip's mass-spring run backwards on the plan.
+
+    ``x = y + 2 zeta y' / omega + y'' / omega^2``: the bend to pull towards, from the wanted
+    bend's own rate and acceleration (the plan's, read two samples ahead), not from the
+    tip's state. Inverting the sampled tip sample by sample would cancel its sampling zero
+    near -1 and ring at half the sample rate; this form puts into the pull what the tip's
+    inertia and damping take out, so a smooth plan excites no ringing. The pull is held
+    over a sample (as :func:`_tip_response` holds its input), so it is the inverse at the
+    sample's middle. The damping is scheduled by the wanted bend, as the block's by the pull
+    (equal at rest). A step in the plan becomes a bounded kick: the pressure bounds cut it.
+    """
+
+    preview_s: float
+
+    def __init__(self, rate_hz: float, values: Sequence[float], forward: Step) -> None:
+        f_hz, self._zeta0, growth_per_rad = values
+        self._omega = 2.0 * math.pi * f_hz
+        self._growth_per_deg = growth_per_rad * math.pi / 180.0
+        self._dt_s = 1.0 / rate_hz
+        self.preview_s = 2.0 / rate_hz
+        self._plan: list[float] = []  # the wanted bend at samples i-1 .. i+2
+        self._forward = forward
+
+    def want(self, target: float) -> float:
+        """The pull for the sample two before ``target`` (the plan's newest)."""
+        if not self._plan:
+            self._plan = [target] * 4  # at rest before the run
+        else:
+            self._plan = [*self._plan[1:], target]
+        before, now, nxt, after = self._plan
+        dt = self._dt_s
+        bend = 0.5 * (now + nxt)
+        rate = (nxt - now) / dt
+        accel = ((after - nxt) - (now - before)) / (2.0 * dt * dt)
+        zeta = self._zeta0 + self._growth_per_deg * max(bend, 0.0)
+        return bend + 2.0 * zeta * rate / self._omega + accel / (self._omega * self._omega)
+
+    def take(self, value: float) -> float:
+        """The tip's bend as the model has it, pulled by ``value``."""
+        return self._forward(value)

@@ -16,6 +16,7 @@ from catheter_models.models.blocks.base import (
     Block,
     BlockParam,
     FloatArray,
+    Inverse,
     Side,
     Step,
     _valve_sized,
@@ -70,3 +71,13 @@ class TransportDelay(Block):
             return y if frac == 0.0 else (1.0 - frac) * y + frac * recent[lo + 1 - oldest]
 
         return step
+
+    def inverse(self, rate_hz: float, values: Sequence[float]) -> Inverse:
+        """A delay is undone by reading the plan ``delay_s`` ahead: nothing to compute.
+
+        The stages behind it then run on the plan's clock ``delay_s`` ahead, which is when
+        the command sent now reaches the muscle.
+        """
+        ahead = Inverse()
+        ahead.preview_s = float(values[0])
+        return ahead

@@ -22,6 +22,8 @@ from catheter_models.units import bar_to_pa, deg_to_rad
 
 FloatArray = npt.NDArray[np.float64]
 Step = Callable[[float], float]
+StateStep = Callable[[float, FloatArray], float]
+"""Advance a core's state one sample in place: ``(pressure [bar], state) -> bend [deg]``."""
 
 RATE_FILTER_S: Final = 0.02
 """Low-pass time constant of the rate estimate that rate-dependent thresholds use [s]."""
@@ -82,8 +84,32 @@ class Core(ABC):
         """Bend [deg] for pressure ``x`` [bar] from rest."""
 
     @abstractmethod
+    def stepper(self, rate_hz: float, *, lagged_rate: bool = False) -> tuple[FloatArray, StateStep]:
+        """A state at rest, and the step that advances any such state by one sample.
+
+        The state is a plain array, so a copy of it is a snapshot: the compensator tries
+        pressures on copies (:class:`CoreInverse`) and advances the real one once.
+
+        ``lagged_rate``: the law's rate term (rate-dependent thresholds, a viscous term) reads
+        the pressure's filtered rate as it was before this sample, the state still learning
+        this sample's rate. The law is then the same but for one sample (4 ms at 250 Hz) of
+        its rate filter's 20 ms, and this sample's bend rises with this sample's pressure.
+        With the rate read now, a threshold that widens faster with the pressure than the
+        pressure itself moves (rate factor above the filter's time constant, as fitted on
+        the foreign plants) makes the bend *fall* as this sample's pressure rises: a zero in
+        the right half-plane, which no stable inverse can cancel (the IDRDPI's answer, eq.
+        9.19, is the same: thresholds on a rate known before the sample).
+        """
+
     def streamer(self, rate_hz: float) -> Step:
         """``run`` one sample at a time, equal to it."""
+        state, advance = self.stepper(rate_hz)
+        return lambda x: advance(x, state)
+
+    def inverse(self, rate_hz: float, low_bar: float, high_bar: float) -> CoreInverse:
+        """The law run backwards, one sample a tick: the pressure for the bend wanted."""
+        state, advance = self.stepper(rate_hz, lagged_rate=True)
+        return CoreInverse(state, advance, low_bar, high_bar)
 
     @abstractmethod
     def values(self) -> dict[str, Any]:
@@ -121,6 +147,118 @@ class Core(ABC):
     def set_vector(self, v: FloatArray) -> None:
         """Adopt the polished vector ``v``."""
         raise NotImplementedError
+
+
+class CoreInverse:
+    """A hysteresis core run backwards: each tick, the pressure whose next bend is the one wanted.
+
+    One law for every core, exact for the law as fitted but for its rate term read one sample
+    late (:meth:`Core.stepper`, ``lagged_rate``; a tension-grown friction, a Bouc-Wen state
+    as they are): a bounded search over this sample's pressure
+    on a copy of the core's state, then the real state advanced once on the pressure the
+    valve will get (:meth:`take`). A hysteresis law's next output does not fall as its input
+    rises (from the same state), so the pressure is bracketed from the last one outwards and
+    found by the Illinois method (regula falsi that halves a stale end: it converges
+    superlinearly and never leaves the bracket). A bend the law cannot reach within
+    ``[low_bar, high_bar]`` gets the nearer bound; where a rate term makes the law not
+    monotone within a sample, the search still returns a pressure inside the bracket.
+
+    The analytic inverses (the thesis's inverse PI, eqs. 9.2-9.11) invert a
+    rate-independent law, or a rate-dependent one on the bend's rate instead of the
+    pressure's; this inverts each core exactly at about 10 evaluations of one sample
+    (bench/bench_greybox_compensator.py times it against the c-LSTM's step).
+    """
+
+    TOLERANCE_DEG = 1e-4
+    """A bend this close to the one wanted is found (far below any laser's resolution)."""
+    TOLERANCE_BAR = 1e-6
+    """A bracket this narrow is the answer (0.1 Pa)."""
+    MAX_EVALUATIONS = 60
+
+    def __init__(
+        self, state: FloatArray, advance: StateStep, low_bar: float, high_bar: float
+    ) -> None:
+        if not (math.isfinite(low_bar) and math.isfinite(high_bar) and low_bar < high_bar):
+            raise ParameterError(f"a core's inverse needs low < high, got [{low_bar}, {high_bar}]")
+        self._state, self._advance = state, advance
+        self._scratch = state.copy()
+        self.low_bar, self.high_bar = float(low_bar), float(high_bar)
+        self._last = float(low_bar)
+        self._closest = (float(low_bar), math.inf)
+        self.evaluations = 0
+        """Evaluations of the law by the last :meth:`want` (what a tick costs)."""
+
+    def _bend(self, x: float) -> float:
+        np.copyto(self._scratch, self._state)
+        self.evaluations += 1
+        return self._advance(x, self._scratch)
+
+    def want(self, target_deg: float) -> float:
+        """The pressure [bar] within the bounds whose bend is ``target_deg`` (or the bound)."""
+        self.evaluations = 0
+        lo, hi = self.low_bar, self.high_bar
+        x = min(max(self._last, lo), hi)
+        fx = self._bend(x) - target_deg
+        if abs(fx) <= self.TOLERANCE_DEG:
+            return x
+        # The way the bend must go first; then the other way, for a fitted law that is not
+        # monotone (a free-weight PI can bend more at a lower pressure): the crossing
+        # nearest the last pressure wins, else the pressure that came closest.
+        first = 1.0 if fx < 0.0 else -1.0
+        best_x, best_f = x, fx
+        for direction in (first, -first):
+            found = self._bracket(x, fx, direction, target_deg)
+            if isinstance(found, float):
+                return found
+            if found is not None:
+                return self._illinois(*found, target_deg)
+            if abs(self._closest[1]) < abs(best_f):
+                best_x, best_f = self._closest
+        return best_x
+
+    def _bracket(
+        self, x: float, fx: float, direction: float, target_deg: float
+    ) -> float | tuple[float, float, float, float] | None:
+        """From ``x`` in ``direction``, in steps growing fourfold, to a sign change.
+
+        A float: a pressure within tolerance; a tuple: the bracket (a, fa, b, fb); None: a
+        bound reached without a crossing (the closest point seen is kept in ``_closest``).
+        """
+        lo, hi = self.low_bar, self.high_bar
+        step = 0.02
+        a, fa = x, fx
+        self._closest = (x, fx)
+        while True:
+            b = min(a + step, hi) if direction > 0.0 else max(a - step, lo)
+            if b == a:
+                return None
+            fb = self._bend(b) - target_deg
+            if abs(fb) <= self.TOLERANCE_DEG:
+                return b
+            if abs(fb) < abs(self._closest[1]):
+                self._closest = (b, fb)
+            if (fb > 0.0) != (fa > 0.0):
+                return (a, fa, b, fb)
+            a, fa, step = b, fb, step * 4.0
+
+    def _illinois(self, a: float, fa: float, b: float, fb: float, target_deg: float) -> float:
+        """The crossing within the bracket [a, b] by the Illinois method."""
+        while self.evaluations < self.MAX_EVALUATIONS and abs(b - a) > self.TOLERANCE_BAR:
+            c = b - fb * (b - a) / (fb - fa)
+            fc = self._bend(c) - target_deg
+            if abs(fc) <= self.TOLERANCE_DEG:
+                return c
+            if (fc > 0.0) != (fb > 0.0):
+                a, fa = b, fb
+            else:
+                fa *= 0.5  # Illinois: the end that stays is halved, so it cannot stall
+            b, fb = c, fc
+        return b
+
+    def take(self, x_bar: float) -> float:
+        """The bend [deg] after the pressure ``x_bar``; the core's state advances."""
+        self._last = x_bar
+        return self._advance(x_bar, self._state)
 
 
 def _recordings(xs: Sequence[FloatArray], ys: Sequence[FloatArray], rate_hz: float) -> list[Any]:

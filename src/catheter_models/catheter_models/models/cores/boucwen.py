@@ -17,7 +17,7 @@ from catheter_models.models.base import ModelError
 from catheter_models.models.cores.base import (
     Core,
     FloatArray,
-    Step,
+    StateStep,
     _alpha,
 )
 
@@ -152,19 +152,30 @@ class BoucWen(Core):
         out: FloatArray = self.columns(x, rate_hz, self.theta) @ self.weights
         return out
 
-    def streamer(self, rate_hz: float) -> Step:
-        """The same kernel one sample at a time."""
+    def stepper(self, rate_hz: float, *, lagged_rate: bool = False) -> tuple[FloatArray, StateStep]:
+        """The Bouc-Wen state at rest, and the same kernel's one-sample step.
+
+        Lagged (:meth:`Core.stepper`), the viscous term reads the rate held before.
+        """
         if self.theta is None or self.weights is None:
             raise ModelError("boucwen core is not fitted")
-        state, sample, cols = np.zeros(4), np.zeros(1), np.zeros((1, 4))
+        sample, cols = np.zeros(1), np.zeros((1, 4))
         theta, weights, alpha = self.theta, self.weights, _alpha(rate_hz)
+        w_s, w_z, w_s2, w_rate, w_0 = (float(w) for w in weights)
 
-        def step(x: float) -> float:
+        def advance(x: float, state: FloatArray) -> float:
             sample[0] = x
             _boucwen_kernel(sample, theta, rate_hz, alpha, self.n_sub, state, cols)
             return float(cols[0] @ weights[:4] + weights[4])
 
-        return step
+        def advance_lagged(x: float, state: FloatArray) -> float:
+            rate = state[2]
+            sample[0] = x
+            _boucwen_kernel(sample, theta, rate_hz, alpha, self.n_sub, state, cols)
+            c = cols[0]
+            return float(w_s * c[0] + w_z * c[1] + w_s2 * c[2] + w_rate * rate + w_0)
+
+        return np.zeros(4), advance_lagged if lagged_rate else advance
 
     def vector(self) -> FloatArray:
         """Shape and weights together."""

@@ -14,7 +14,7 @@ from catheter_models.hysteresis import operators as op
 from catheter_models.models.base import ModelError
 from catheter_models.models.cores.base import (
     FloatArray,
-    Step,
+    StateStep,
     _recordings,
     _ThesisCore,
 )
@@ -111,17 +111,30 @@ class DRDPICore(_ThesisCore):
         """Bend [deg] from rest."""
         return self._run_coef(self._coef_at(rate_hz), x)
 
-    def streamer(self, rate_hz: float) -> Step:
-        """The chain one sample at a time."""
+    def stepper(self, rate_hz: float, *, lagged_rate: bool = False) -> tuple[FloatArray, StateStep]:
+        """The chain's state at rest, and its one-sample step (see :meth:`Core.stepper`)."""
         coef = self._coef_at(rate_hz)
-        state, sample, out = np.zeros(op.chain_state_size(coef)), np.zeros(1), np.zeros(1)
+        sample, out = np.zeros(1), np.zeros(1)
+        alpha = float(coef[op.C_RATE_ALPHA])
 
-        def step(x: float) -> float:
+        def advance(x: float, state: FloatArray) -> float:
             sample[0] = x
             op.chain_run(sample, coef, state, out)
             return float(out[0])
 
-        return step
+        def advance_lagged(x: float, state: FloatArray) -> float:
+            # The thesis's kernel, unchanged, reads the rate it updates with this sample. A
+            # previous input set so that this sample's difference is the rate already held
+            # makes it read that rate; the rate's true update is put back after. (The DRDPI's
+            # input stage is the identity, so the PI stage's input is the pressure.)
+            previous, rate = state[op.S_PREVIOUS_INPUT], state[op.S_RATE]
+            state[op.S_PREVIOUS_INPUT] = x - rate / rate_hz
+            sample[0] = x
+            op.chain_run(sample, coef, state, out)
+            state[op.S_RATE] = rate + alpha * ((x - previous) * rate_hz - rate)
+            return float(out[0])
+
+        return np.zeros(op.chain_state_size(coef)), advance_lagged if lagged_rate else advance
 
     def vector(self) -> FloatArray:
         """The free search coordinates of the DRDPI's box."""

@@ -20,7 +20,7 @@ from catheter_models.models.cores.base import (
     TENSION_SCALE_MAX,
     Core,
     FloatArray,
-    Step,
+    StateStep,
     _alpha,
 )
 
@@ -278,20 +278,33 @@ class FreePI(Core):
         )
         return out
 
-    def streamer(self, rate_hz: float) -> Step:
-        """The same kernel one sample at a time, its state carried."""
+    def stepper(self, rate_hz: float, *, lagged_rate: bool = False) -> tuple[FloatArray, StateStep]:
+        """The plays' state at rest, and the kernel's one-sample step (:meth:`Core.stepper`)."""
         if self.weights is None or self.beta_s is None:
             raise ModelError("free_pi core is not fitted")
-        state, sample, out = self._state(), np.zeros(1), np.zeros(1)
+        sample, out = np.zeros(1), np.zeros(1)
         args = self._kernel_args(rate_hz, self.beta_s)
         weights, empty = self.weights, np.empty((0, 0))
+        offsets, n_off, alpha = self._offsets, self.n_offsets, args[3]
 
-        def step(x: float) -> float:
+        def advance(x: float, state: FloatArray) -> float:
             sample[0] = x
             _free_pi_kernel(sample, *args, state, weights, empty, out)
             return float(out[0])
 
-        return step
+        def advance_lagged(x: float, state: FloatArray) -> float:
+            if state[2 * n_off] == 0.0:  # the first sample: no rate yet either way
+                return advance(x, state)
+            # As the DRDPI core's: previous inputs set so the kernel reads the rates held,
+            # their true update put back after.
+            s = np.maximum(x - offsets, 0.0)
+            previous, rates = state[:n_off].copy(), state[n_off : 2 * n_off].copy()
+            state[:n_off] = s - rates / rate_hz
+            y = advance(x, state)
+            state[n_off : 2 * n_off] = rates + alpha * ((s - previous) * rate_hz - rates)
+            return y
+
+        return self._state(), advance_lagged if lagged_rate else advance
 
     def values(self) -> dict[str, Any]:
         """Rate factor, tension share and weights (the last weight is the constant)."""

@@ -15,7 +15,7 @@ from catheter_models.hysteresis import gpi_kernels
 from catheter_models.models.base import ModelError
 from catheter_models.models.cores.base import (
     FloatArray,
-    Step,
+    StateStep,
     _recordings,
     _ThesisCore,
 )
@@ -65,19 +65,19 @@ class GPICore(_ThesisCore):
             raise ModelError("gpi core is not fitted")
         return run_gpi(self._coef(self.params), x)
 
-    def streamer(self, rate_hz: float) -> Step:
-        """The GPI one sample at a time."""
+    def stepper(self, rate_hz: float, *, lagged_rate: bool = False) -> tuple[FloatArray, StateStep]:
+        """The GPI's state at rest, and its one-sample step (rate-independent: no lag)."""
         if self.params is None:
             raise ModelError("gpi core is not fitted")
         coef = self._coef(self.params)
-        state, sample, out = gpi_kernels.gpi_rest_state(coef), np.zeros(1), np.zeros(1)
+        sample, out = np.zeros(1), np.zeros(1)
 
-        def step(x: float) -> float:
+        def advance(x: float, state: FloatArray) -> float:
             sample[0] = x
             gpi_kernels.gpi_run(sample, coef, state, out)
             return float(out[0])
 
-        return step
+        return gpi_kernels.gpi_rest_state(coef), advance
 
     def vector(self) -> FloatArray:
         """Table 9.1's parameters."""
