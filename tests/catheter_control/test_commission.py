@@ -243,3 +243,27 @@ def test_the_dead_time_comes_from_the_explained_chain_where_the_lab_found_one(
     shutil.copytree(SUPPORT_DIR / "foreign_plants" / "boucwen_delay_chain", explained / "step2")
     assert job.chain_dead_time_s() == pytest.approx(0.0506, abs=1e-4)
     assert job.dead_time() == (pytest.approx(0.052), "the lab's explained chain")
+
+
+def test_the_explained_chain_becomes_the_greybox_candidate(tmp_path: Path) -> None:
+    import shutil
+
+    from foreign_plants import SUPPORT_DIR
+
+    from catheter_control.models import load_compensator
+
+    job = _job(tmp_path)
+    _tuned(job, resonance_hz=4.0)  # a ringing tip: the others are also tried shaped
+    assert "greybox+pi" not in [c.name for c in job.candidates()]
+    explained = job.out_dir / "forward" / "explain"
+    shutil.copytree(SUPPORT_DIR / "foreign_plants" / "boucwen_delay_chain", explained / "step2")
+    record = steps.StepRecord()
+    job._greybox(record)
+    assert record.facts["chain"] == ["transport_delay", "free_pi"]
+    assert record.facts["preview_s"] == pytest.approx(0.0506, abs=1e-4)
+    names = [c.name for c in job.candidates()]
+    # The inverse times the tip's pull from the plan itself: no shaped variant of it.
+    assert "greybox+pi" in names and "greybox+zvd+pi" not in names
+    assert "idrdpi+zvd+pi" in names
+    compensator = load_compensator("greybox", str(job.candidate_dir("greybox")))
+    assert compensator.preview_s == pytest.approx(0.0506, abs=1e-4)

@@ -182,6 +182,43 @@ def test_the_cli_writes_gains_a_node_can_load_and_a_report(tmp_path: Path) -> No
     assert (tmp_path / "r" / "loop.png").stat().st_size > 10_000
 
 
+def test_the_cli_takes_the_loop_from_the_explained_chain_and_says_so(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from catheter_models.models.cores import make_core
+    from catheter_models.models.greybox import GreyBox
+
+    bag = tmp_path / "steps"
+    with pytest.raises(SystemExit) as done:
+        lab_main(["simulate", "lab_steps_101", "-o", str(bag)])
+    assert not done.value.code
+    # A chain as the lab writes one (its core's values do not enter the loop's shape).
+    chain = GreyBox(effects=["transport_delay", "pneumatic_lag"], core="free_pi")
+    chain._set(
+        make_core("free_pi"),
+        {"transport_delay": [0.02], "pneumatic_lag": [0.03, 1.0, 1e8]},
+        250.0,
+    )
+    chain.core_.weights, chain.core_.beta_s = np.zeros(chain.core_.n_columns), 0.0
+    chain_dir = tmp_path / "explained"
+    chain.save(chain_dir)
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as done:
+        lab_main(
+            ["tune", str(bag), "-o", str(tmp_path / "m"), "--chain", str(tmp_path / "explained")]
+        )
+    assert not done.value.code
+    out = capsys.readouterr().out
+    assert "loop from the chain: " in out and "dead time 20.0 ms, lag 30.0 ms" in out, out
+    assert "loop from the steps: " in out
+    tuning = FeedbackGains.load(tmp_path / "m").tuning
+    assert tuning["chain"] == str(chain_dir)
+    assert tuning["shape_from"] in ("chain", "steps")
+    assert isinstance(tuning["disagreements"], list)
+    if tuning["shape_from"] == "chain":
+        assert tuning["loop"]["delay_s"] == pytest.approx(0.02)
+
+
 def test_a_bend_that_arrives_late_is_designed_for() -> None:
     """A laser driver stamps the time the bend was true and sends it 12 ms later: the steps
     (fitted on stamps) cannot show it, the recording's measurement age does, and a design that

@@ -14,7 +14,8 @@ commands, and the report shows each one as it was run):
    before anything is fitted).
 2. ``explain``: the thesis's DRDPI, then the lab's loop (``catheter-lab explain``): which
    hysteresis law and which physical effects this catheter shows.
-3. ``idrdpi``, ``clstm``: the compensators (the c-LSTM only with ``--clstm-budget-s``).
+3. ``idrdpi``, ``clstm``, ``greybox``: the compensators (the c-LSTM only with
+   ``--clstm-budget-s``; the explained chain run backwards where its core is invertible).
 4. ``tune``: the PI on the measured bend, from the recorded steps, for margins it reports.
 5. ``follow:<candidate>:<trajectory>``: each compensator with the tuned PI on the four
    thesis trajectories, on the rig.
@@ -161,6 +162,8 @@ class Commission:
         the tip, which the PI, held to a crossover below the mode, cannot undo.
         """
         kinds = ["idrdpi"] + (["clstm"] if self.clstm_budget_s > 0 else [])
+        if self.candidate_dir("greybox").exists():
+            kinds.append("greybox")
         shapings = ["none"] + (["zvd"] if self.tip_mode_hz() > 0.0 else [])
         gains = self.tune_dir / "feedback.json"
         return [
@@ -174,6 +177,9 @@ class Commission:
             )
             for k in kinds
             for shaping in shapings
+            # The chain's inverse pulls a ringing tip by the plan itself: shaping its
+            # pressure would delay what it already timed.
+            if not (k == "greybox" and shaping != "none")
         ]
 
     # -- running steps --------------------------------------------------------------------
@@ -230,18 +236,8 @@ class Commission:
         self.step("explain", "explain the catheter (lab)", self._explain, forward / "explain")
         self.step(
             "tune",
-            "tune the PI on the measured bend",
-            lambda rec: run_lab(
-                [
-                    "tune",
-                    train,
-                    "-o",
-                    str(self.tune_dir),
-                    "--report",
-                    str(self.tune_dir / "report"),
-                ],
-                rec,
-            ),
+            "tune the PI on the measured bend (the loop's shape from the explained chain)",
+            functools.partial(self._tune, train),
             self.tune_dir / "feedback.json",
         )
         self.step(
@@ -257,6 +253,11 @@ class Commission:
                 self._clstm,
                 self.candidate_dir("clstm"),
             )
+        self.step(
+            "greybox",
+            "run the explained chain backwards (the greybox compensator)",
+            self._greybox,
+        )
         for candidate in self.candidates():
             for trajectory in self.trajectories:
                 run_dir = self.out_dir / "runs" / candidate.name / trajectory
@@ -334,6 +335,15 @@ class Commission:
         explanation = json.loads((forward / "explain" / "explanation.json").read_text())
         record.facts["explanation"] = explanation
 
+    def _tune(self, train: str, record: StepRecord) -> None:
+        argv = ["tune", train, "-o", str(self.tune_dir), "--report", str(self.tune_dir / "report")]
+        explained = self.explained_dir()
+        if explained is not None:
+            # One model of the catheter: the loop's dead time, lag and tip are the chain's,
+            # checked against the recorded steps (disagreements said, in the tuning record).
+            argv += ["--chain", str(explained)]
+        run_lab(argv, record)
+
     def tuned_dead_time_s(self) -> float:
         """The tuned loop's dead time plus lag [s] (0 before tuning).
 
@@ -343,19 +353,26 @@ class Commission:
         loop = self.tuned_loop()
         return float(loop.get("delay_s", 0.0)) + float(loop.get("time_constant_s", 0.0))
 
-    def chain_dead_time_s(self) -> float | None:
-        """The explained chain's transport delay plus pneumatic lag [s].
+    def explained_dir(self) -> Path | None:
+        """The lab's last version of the explained chain.
 
-        None when the lab found neither (or has not explained the catheter yet).
+        None when the lab changed nothing (or has not explained the catheter yet).
         """
         steps = [
             p
             for p in (self.out_dir / "forward" / "explain").glob("step*")
             if p.name[4:].isdigit() and (p / "manifest.json").exists()
         ]
-        if not steps:
+        return max(steps, key=lambda p: int(p.name[4:])) if steps else None
+
+    def chain_dead_time_s(self) -> float | None:
+        """The explained chain's transport delay plus pneumatic lag [s].
+
+        None when the lab found neither (or has not explained the catheter yet).
+        """
+        final = self.explained_dir()
+        if final is None:
             return None
-        final = max(steps, key=lambda p: int(p.name[4:]))
         # Asked by the IDRDPI's step and the c-LSTM's: the model is loaded (and its hash
         # checked) once per version of the explained chain.
         key = (final, (final / "manifest.json").stat().st_mtime_ns)
@@ -457,6 +474,46 @@ class Commission:
                 str(out),
             ],
             record,
+        )
+
+    def _greybox(self, record: StepRecord) -> None:
+        """The explained chain as a candidate, where its core can be run backwards.
+
+        A chain whose fitted core is not invertible sample by sample is said, with its
+        miss, and left out of the candidates (the others still run).
+        """
+        from catheter_models.errors import ParameterError
+        from catheter_models.models import load_model
+        from catheter_models.models.greybox import GreyBox
+        from catheter_models.models.greybox_inverse import GreyBoxInverse
+
+        out = self.candidate_dir("greybox")
+        if out.exists():
+            shutil.rmtree(out)
+        source = self.explained_dir() or self.out_dir / "forward" / "drdpi"
+        model = load_model(source)
+        chain = GreyBox.chain_of(model)
+        if chain is None:
+            raise StepError(f"{source} holds no chain to run backwards")
+        record.commands.append(f"compensator greybox from {source}")
+        try:
+            inverse = GreyBoxInverse(chain)
+        except ParameterError as exc:
+            record.facts.update(refused=str(exc), chain=list(chain.chain))
+            print(f"commission: greybox left out: {exc}")
+            return
+        record.facts.update(
+            chain=list(chain.chain),
+            preview_s=inverse.preview_s,
+            inversion_miss_deg=inverse.inversion_miss_deg,
+        )
+        if chain is model:
+            shutil.copytree(source, out)
+        else:
+            chain.save(out)  # the thesis's DRDPI as the chain it is (no change was made)
+        print(
+            f"commission: greybox: {' -> '.join(chain.chain)}, reads the plan "
+            f"{inverse.preview_s * 1e3:.0f} ms ahead"
         )
 
     def _follow(

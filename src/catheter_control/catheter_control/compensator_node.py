@@ -446,9 +446,18 @@ class CompensatorNode(LifecycleLoopNode):
             times.append(point.time_from_start.sec + point.time_from_start.nanosec * 1e-9)
             angles.append(point.positions[j])
         try:
-            return TrajectoryPlan.from_knots(times, angles, self.limits, self.rate_hz)
+            plan = TrajectoryPlan.from_knots(times, angles, self.limits, self.rate_hz)
         except CatheterError as exc:
             return str(exc)
+        preview_s = float(getattr(self.core.compensator, "preview_s", 0.0))
+        if plan.duration_s < preview_s:
+            # Read that far ahead, a plan this short is its last point from the first tick:
+            # the catheter would jump there, one dead time late, not follow it.
+            return (
+                f"the plan lasts {plan.duration_s:.3f} s, less than the {preview_s:.3f} s the "
+                f"{self.kind} compensator reads ahead (the loop's dead time it undoes)"
+            )
+        return plan
 
     def submit_trajectory(self, msg: JointTrajectory) -> str | None:
         """Accept ``msg`` for the control thread to run, or refuse it: the reason, or None.

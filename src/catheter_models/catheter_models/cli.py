@@ -234,6 +234,14 @@ def build_parser() -> argparse.ArgumentParser:
         default=1.6,
         help="bound on Ms (1.6: gain margin >= 2.7, phase margin >= 36 deg)",
     )
+    tune.add_argument(
+        "--chain",
+        type=Path,
+        default=None,
+        metavar="MODEL_DIR",
+        help="the lab's explained model (catheter-lab explain/add): the loop's dead time, lag "
+        "and tip come from it, checked against the steps (each disagreement said)",
+    )
     tune.add_argument("--report", type=Path, default=None, help="write an HTML report here")
     tune.add_argument("--rate-hz", type=float, default=SENSOR_RATE_HZ, help="resampling rate [Hz]")
     _accept_implausible_argument(tune)

@@ -237,14 +237,20 @@ def _cmd_tune(args: argparse.Namespace) -> int:
     recordings = recordings_from_bags(
         args.bags, rate_hz=args.rate_hz, accept_implausible=args.accept_implausible
     )
-    model = identify(recordings)
-    print(f"loop model: {model.describe()}")
-    gains, found = design(
-        model,
-        max_sensitivity=args.max_sensitivity,
-        opening_pressure_pa=opening_pressure_pa(recordings),
+    if args.chain is not None:
+        model, gains, found, decided = _tune_on_chain(args, recordings)
+    else:
+        model = identify(recordings)
+        print(f"loop model: {model.describe()}")
+        gains, found = design(
+            model,
+            max_sensitivity=args.max_sensitivity,
+            opening_pressure_pa=opening_pressure_pa(recordings),
+        )
+        decided = {}
+    gains = replace(
+        gains, tuning={**gains.tuning, **decided, "recordings": [r.name for r in recordings]}
     )
-    gains = replace(gains, tuning={**gains.tuning, "recordings": [r.name for r in recordings]})
     notch = (
         f", notch at {gains.notch_frequency_hz:.2f} Hz" if gains.notch_frequency_hz > 0.0 else ""
     )
@@ -258,6 +264,37 @@ def _cmd_tune(args: argparse.Namespace) -> int:
     if args.report is not None:
         print(f"report: {write_tune_report(recordings, model, gains, found, args.report)}")
     return 0
+
+
+def _tune_on_chain(args: argparse.Namespace, recordings: list[Any]) -> tuple[Any, ...]:
+    """``tune --chain``: the loop's shape from the explained model, checked on the steps."""
+    from catheter_models.errors import ParameterError
+    from catheter_models.feedback.chain_loop import design_on_chain
+    from catheter_models.feedback.tune import opening_pressure_pa
+    from catheter_models.models import load_model
+    from catheter_models.models.greybox import GreyBox
+
+    chain = GreyBox.chain_of(load_model(args.chain))
+    if chain is None:
+        raise ParameterError(
+            f"{args.chain} holds a black-box model: no chain to read the loop from "
+            "(give the grey box catheter-lab explain or add wrote, or leave --chain out)"
+        )
+    tuned = design_on_chain(
+        recordings,
+        chain,
+        max_sensitivity=args.max_sensitivity,
+        opening_pressure_pa=opening_pressure_pa(recordings),
+    )
+    print(f"loop from the chain: {tuned.chain_loop.describe()}")
+    print(f"loop from the steps: {tuned.steps_loop.describe()}")
+    for said in tuned.disagreements:
+        print(f"  disagreement: {said}")
+    if not tuned.disagreements:
+        print("  the chain and the recorded steps agree")
+    whose = "the recorded steps'" if tuned.shape_from == "steps" else "the chain's"
+    print(f"designed on {whose} loop")
+    return tuned.model, tuned.gains, tuned.margins, {**tuned.record(), "chain": str(args.chain)}
 
 
 def _reseal(args: argparse.Namespace) -> int:

@@ -274,8 +274,10 @@ def _fit(
     return best[1], ks, nrmse
 
 
-def identify(recordings: Sequence[Recording]) -> LoopModel:
-    """Fit the loop's model to every step of ``recordings`` (see the module doc).
+def step_rows(recordings: Sequence[Recording]) -> tuple[FloatArray, FloatArray, FloatArray, float]:
+    """The steps a loop is fitted to: command and bend deviations, one step a row; the rate.
+
+    Rows are zero-padded at the end; the mask is 1 on the samples that belong to the step.
 
     Raises:
         SignalError: fewer than 3 steps (record a ``lab_steps_*`` excitation), or recordings
@@ -319,6 +321,34 @@ def identify(recordings: Sequence[Recording]) -> LoopModel:
         u_rows[i, du.size :] = du[-1]
         y_rows[i, : dy.size] = dy
         mask[i, : du.size] = 1.0
+    return u_rows, y_rows, mask, rate
+
+
+def shape_fit(
+    u: FloatArray,
+    y: FloatArray,
+    mask: FloatArray,
+    dt_s: float,
+    theta: FloatArray,
+    *,
+    resonance: bool,
+) -> tuple[FloatArray, float]:
+    """Each step's gain and the normalised residual of the fixed shape ``theta`` (log values)."""
+    r = _shape_response(theta, u, dt_s, resonance) * mask
+    rr = np.sum(r * r, axis=1)
+    ks = np.where(rr > 0.0, np.sum(r * y, axis=1) / np.where(rr > 0.0, rr, 1.0), 0.0)
+    resid = (y - ks[:, None] * r) * mask
+    return ks, float(np.sqrt(np.sum(resid**2) / max(np.sum((y * mask) ** 2), 1e-300)))
+
+
+def identify(recordings: Sequence[Recording]) -> LoopModel:
+    """Fit the loop's model to every step of ``recordings`` (see the module doc).
+
+    Raises:
+        SignalError: fewer than 3 steps (record a ``lab_steps_*`` excitation), or recordings
+            at different rates.
+    """
+    u_rows, y_rows, mask, rate = step_rows(recordings)
     dt = 1.0 / rate
     plain, ks_plain, err_plain = _fit(u_rows, y_rows, mask, dt, resonance=False)
     ringing, ks_ring, err_ring = _fit(u_rows, y_rows, mask, dt, resonance=True)
@@ -338,7 +368,7 @@ def identify(recordings: Sequence[Recording]) -> LoopModel:
         resonance_hz=math.exp(theta[2]) if use_ring else 0.0,
         resonance_damping=math.exp(theta[3]) if use_ring else 0.0,
         fit_nrmse=err,
-        n_steps=len(steps),
+        n_steps=u_rows.shape[0],
         rate_hz=rate,
         measurement_age_s=max(r.measurement_age_s for r in recordings),
     )

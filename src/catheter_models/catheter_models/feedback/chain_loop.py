@@ -1,0 +1,223 @@
+"""The loop's shape from the explained model, checked against the recorded steps.
+
+``catheter-lab tune`` identifies a dead time, a lag and a ringing tip from recorded steps
+(:func:`~catheter_models.feedback.tune.identify`). Where the lab has explained the catheter
+(a grey box: ``catheter-lab explain``), that chain already holds the same physics, fitted on
+the whole recording with the hysteresis in it. :func:`loop_from_chain` takes the loop's shape
+from the chain linearised around the operating range:
+
+* dead time: the chain's transport delay (0 without one);
+* lag: its pneumatic lag's filling time constant, plus an output lag's;
+* tip: its tip block's natural frequency, and its damping at the recordings' median bend
+  (the block's damping grows with the bend);
+
+and only each step's gain from the steps (a PAM catheter's local gain changes along its
+curve; the loop is designed for :data:`~catheter_models.feedback.tune.GAIN_PERCENTILE` of
+them, as before). :func:`disagreements` says where the chain and the steps' own fit differ,
+in words a person can act on; the tuner designs on the chain's shape and checks the gains on
+the steps' loop too, falling back to the steps' loop where the chain's would not be stable
+on it (a chain that misses a delay the steps show).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from catheter_models.errors import SignalError
+from catheter_models.feedback.law import FeedbackGains
+from catheter_models.feedback.tune import (
+    GAIN_PERCENTILE,
+    LoopModel,
+    Margins,
+    design,
+    identify,
+    margins,
+    plainly_stable,
+    shape_fit,
+    step_rows,
+)
+from catheter_models.models.base import Recording
+from catheter_models.models.greybox import GreyBox
+
+MIN_DELAY_S = 1e-4
+"""The shortest dead time the shape takes (its fit's lower bound): 'none' in the chain."""
+MIN_LAG_S = 1e-3
+"""The shortest lag the shape takes (its fit's lower bound)."""
+TIME_TOLERANCE_S = 0.010
+"""A dead time or lag differs when apart by more than this [s] (and :data:`TIME_SHARE`)."""
+TIME_SHARE = 0.3
+"""... and by more than this share of the larger."""
+FREQUENCY_SHARE = 0.15
+"""A tip's frequency differs when apart by more than this share."""
+RESIDUAL_FACTOR = 1.5
+"""The chain's shape fits the steps worse when its residual exceeds the steps' own by this
+factor (plus 0.05)."""
+
+
+@dataclass(frozen=True)
+class ChainShape:
+    """The loop's shape read from a chain: dead time, lag, tip (0: none)."""
+
+    delay_s: float
+    time_constant_s: float
+    resonance_hz: float
+    resonance_damping: float
+    chain: tuple[str, ...]
+
+    def describe(self) -> str:
+        """One line for a person."""
+        tip = (
+            f", tip {self.resonance_hz:.2f} Hz damped {self.resonance_damping:.2f}"
+            if self.resonance_hz > 0.0
+            else ""
+        )
+        return (
+            f"dead time {self.delay_s * 1e3:.1f} ms, lag {self.time_constant_s * 1e3:.1f} ms"
+            f"{tip} (from {' -> '.join(self.chain)})"
+        )
+
+
+def chain_shape(chain: GreyBox, typical_bend_rad: float) -> ChainShape:
+    """The shape of ``chain`` linearised at ``typical_bend_rad`` (see the module)."""
+    values = chain.block_values()
+    delay = values.get("transport_delay", {}).get("delay_s", 0.0)
+    lag = values.get("pneumatic_lag", {}).get("time_constant_s", 0.0)
+    lag += values.get("output_lag", {}).get("time_constant_s", 0.0)
+    tip = values.get("tip_dynamics")
+    f_hz = zeta = 0.0
+    if tip is not None:
+        f_hz = tip["natural_frequency_hz"]
+        zeta = tip["damping_ratio"] + tip["damping_per_rad"] * max(typical_bend_rad, 0.0)
+    return ChainShape(delay, lag, f_hz, zeta, chain.chain)
+
+
+def loop_from_chain(recordings: Sequence[Recording], chain: GreyBox) -> LoopModel:
+    """The loop with the chain's shape and the recorded steps' gains (see the module).
+
+    Raises:
+        SignalError: as :func:`~catheter_models.feedback.tune.identify` (too few steps).
+    """
+    u, y, mask, rate = step_rows(recordings)
+    bend = np.concatenate([np.asarray(r.angle_rad, dtype=float) for r in recordings])
+    shape = chain_shape(chain, float(np.median(bend)))
+    resonance = shape.resonance_hz > 0.0
+    theta = [
+        math.log(max(shape.delay_s, MIN_DELAY_S)),
+        math.log(max(shape.time_constant_s, MIN_LAG_S)),
+    ]
+    if resonance:
+        theta += [math.log(shape.resonance_hz), math.log(max(shape.resonance_damping, 1e-3))]
+    ks, nrmse = shape_fit(u, y, mask, 1.0 / rate, np.asarray(theta), resonance=resonance)
+    positive = ks[ks > 0.0]
+    if positive.size == 0:
+        raise SignalError("tune: no step moved the bend up with the pressure: check the sign")
+    return LoopModel(
+        gain_rad_per_pa=float(np.percentile(positive, GAIN_PERCENTILE)),
+        gain_median_rad_per_pa=float(np.median(positive)),
+        time_constant_s=math.exp(theta[1]),
+        delay_s=math.exp(theta[0]),
+        resonance_hz=shape.resonance_hz,
+        resonance_damping=max(shape.resonance_damping, 1e-3) if resonance else 0.0,
+        fit_nrmse=nrmse,
+        n_steps=u.shape[0],
+        rate_hz=rate,
+        measurement_age_s=max(r.measurement_age_s for r in recordings),
+    )
+
+
+def _times_differ(a_s: float, b_s: float) -> bool:
+    return abs(a_s - b_s) > max(TIME_TOLERANCE_S, TIME_SHARE * max(a_s, b_s))
+
+
+def disagreements(from_chain: LoopModel, from_steps: LoopModel) -> list[str]:
+    """Where the chain's loop and the steps' own fit differ, each said (empty: they agree)."""
+    out = []
+    for what, a, b in (
+        ("dead time", from_chain.delay_s, from_steps.delay_s),
+        ("lag", from_chain.time_constant_s, from_steps.time_constant_s),
+    ):
+        if _times_differ(a, b):
+            out.append(
+                f"{what}: the chain has {a * 1e3:.1f} ms, the recorded steps show {b * 1e3:.1f} ms"
+            )
+    tip_a, tip_b = from_chain.resonance_hz, from_steps.resonance_hz
+    if (tip_a > 0.0) != (tip_b > 0.0):
+        has, lacks = (
+            ("the chain", "the recorded steps")
+            if tip_a > 0.0
+            else (
+                "the recorded steps",
+                "the chain",
+            )
+        )
+        out.append(f"tip: {has} ring at {max(tip_a, tip_b):.2f} Hz, {lacks} do not")
+    elif tip_a > 0.0 and abs(tip_a - tip_b) > FREQUENCY_SHARE * max(tip_a, tip_b):
+        out.append(f"tip: the chain rings at {tip_a:.2f} Hz, the recorded steps at {tip_b:.2f} Hz")
+    if from_chain.fit_nrmse > RESIDUAL_FACTOR * from_steps.fit_nrmse + 0.05:
+        out.append(
+            f"fit: the chain's shape leaves {from_chain.fit_nrmse:.1%} of the steps' response "
+            f"unexplained, their own fit {from_steps.fit_nrmse:.1%}"
+        )
+    return out
+
+
+CHECK_SENSITIVITY_FACTOR = 1.25
+"""Gains designed on the chain's loop are kept when, on the steps' own loop, they are plainly
+stable with Ms within this factor of the bound (1.6 -> 2.0: a gain margin of at least 2)."""
+
+
+@dataclass(frozen=True)
+class ChainTuning:
+    """What tuning on a chain decided, for a person and for ``feedback.json``."""
+
+    model: LoopModel
+    """The loop the gains were designed on."""
+    gains: FeedbackGains
+    margins: Margins
+    steps_loop: LoopModel
+    chain_loop: LoopModel
+    disagreements: list[str]
+    shape_from: str
+    """'chain' or 'steps' (the chain's gains were not stable enough on the steps' loop)."""
+
+    def record(self) -> dict[str, object]:
+        """The decision, as ``feedback.json``'s tuning keeps it."""
+        return {
+            "shape_from": self.shape_from,
+            "chain_loop": self.chain_loop.describe(),
+            "steps_loop": self.steps_loop.describe(),
+            "disagreements": list(self.disagreements),
+        }
+
+
+def design_on_chain(
+    recordings: Sequence[Recording],
+    chain: GreyBox,
+    *,
+    max_sensitivity: float = 1.6,
+    opening_pressure_pa: float = 0.0,
+) -> ChainTuning:
+    """Design on the chain's loop; check the gains on the steps' own loop (see the module).
+
+    Raises:
+        SignalError: too few steps, or no PI within the bound on the loop designed for.
+    """
+    steps_loop = identify(recordings)
+    chain_loop = loop_from_chain(recordings, chain)
+    said = disagreements(chain_loop, steps_loop)
+    gains, found = design(chain_loop, max_sensitivity, opening_pressure_pa)
+    on_steps = margins(steps_loop, gains)
+    if plainly_stable(steps_loop, gains) and (
+        on_steps.max_sensitivity <= CHECK_SENSITIVITY_FACTOR * max_sensitivity
+    ):
+        return ChainTuning(chain_loop, gains, found, steps_loop, chain_loop, said, "chain")
+    said.append(
+        f"the gains designed on the chain's loop would run the steps' loop at "
+        f"{on_steps.describe()}: designed on the steps' loop instead"
+    )
+    gains, found = design(steps_loop, max_sensitivity, opening_pressure_pa)
+    return ChainTuning(steps_loop, gains, found, steps_loop, chain_loop, said, "steps")

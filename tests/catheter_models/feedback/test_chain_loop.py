@@ -1,0 +1,70 @@
+"""``tune --chain``: the loop's shape from the explained chain, checked on the recorded steps.
+
+The steps are a foreign plant's (tests/support), with a 47 ms transport delay hidden; the
+chain is the lab's form of it, its values set as an explanation would find them.
+"""
+
+import math
+
+import pytest
+from foreign_plants import PLANTS
+from foreign_plants.cases import draw_case
+
+from catheter_models.feedback.chain_loop import chain_shape, design_on_chain, loop_from_chain
+from catheter_models.feedback.tune import margins, plainly_stable
+from catheter_models.models.cores import make_core
+from catheter_models.models.greybox import GreyBox
+
+
+@pytest.fixture(scope="module")
+def delayed_case():
+    case = draw_case(PLANTS["maxwell_slip"], ["transport_delay"], 1)
+    return case, case.effects[0].params["delay_s"]
+
+
+def chain(effects: dict[str, list[float]]) -> GreyBox:
+    model = GreyBox(effects=list(effects), core="free_pi")
+    # The loop's shape reads the blocks only; the core's values do not enter it.
+    model._set(make_core("free_pi"), effects, 250.0)
+    return model
+
+
+def test_the_shape_is_the_chain_s_delay_lag_and_tip_at_the_typical_bend() -> None:
+    shape = chain_shape(
+        chain(
+            {
+                "transport_delay": [0.04],
+                "pneumatic_lag": [0.03, 1.0, 1e8],
+                "tip_dynamics": [4.0, 0.1, 0.2],
+            }
+        ),
+        typical_bend_rad=math.radians(20.0),
+    )
+    assert (shape.delay_s, shape.time_constant_s, shape.resonance_hz) == (0.04, 0.03, 4.0)
+    # The block's damping grows with the bend: 0.1 straight, more at 20 deg.
+    assert shape.resonance_damping == pytest.approx(0.1 + 0.2 * math.radians(20.0))
+
+
+def test_a_chain_that_agrees_with_the_steps_shapes_the_loop(delayed_case) -> None:
+    case, delay_s = delayed_case
+    tuned = design_on_chain([case.train], chain({"transport_delay": [delay_s]}))
+    assert tuned.shape_from == "chain"
+    assert tuned.model.delay_s == pytest.approx(delay_s)
+    assert not [d for d in tuned.disagreements if d.startswith("dead time")]
+    # The gains were checked on the steps' own loop too.
+    assert plainly_stable(tuned.steps_loop, tuned.gains)
+    assert tuned.record()["shape_from"] == "chain"
+
+
+def test_a_chain_missing_the_delay_is_said_and_not_trusted(delayed_case) -> None:
+    case, _ = delayed_case
+    blind = chain({})
+    loop = loop_from_chain([case.train], blind)
+    assert loop.delay_s < 1e-3
+    tuned = design_on_chain([case.train], blind)
+    said = [d for d in tuned.disagreements if d.startswith("dead time")]
+    assert said and "the recorded steps show" in said[0], tuned.disagreements
+    # Gains for a loop without the delay would ring on the real one: designed on the steps.
+    assert tuned.shape_from == "steps"
+    assert tuned.model == tuned.steps_loop
+    assert margins(tuned.steps_loop, tuned.gains).max_sensitivity <= 1.6 + 1e-6
