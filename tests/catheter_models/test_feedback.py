@@ -303,3 +303,36 @@ def test_a_feedforward_at_another_rate_is_refused() -> None:
 
     with pytest.raises(ParameterError, match="100 Hz"):
         _loop(GAINS, Sampled(1.0))
+
+
+@pytest.mark.parametrize(
+    "filters",
+    [
+        {"notch_frequency_hz": 4.9, "notch_damping": 0.5},  # a ringing tip's notch
+        {"measurement_filter_s": 0.02},  # a noisy laser's low-pass
+    ],
+)
+def test_a_bend_that_follows_the_plan_asks_the_feedback_for_nothing(filters: dict) -> None:
+    # The set-point passes the measurement's filters too: filtering the bend alone delays
+    # it (the notch: ~30 ms at 1 Hz), and the feedback then pushed a bend the feedforward had
+    # right ahead of the plan (0.10 -> 0.48 deg on the Bouc-Wen tip plant's down-chirp).
+    gains = FeedbackGains(4.0e4, 2.0e6, **filters)
+    fb = PIDFeedback(gains, RATE_HZ)
+    t = np.arange(int(5 * RATE_HZ)) / RATE_HZ
+    plan = np.radians(15.0 + 8.0 * np.sin(2 * np.pi * 1.0 * t))
+    corrections = [
+        fb.command(
+            float(a),
+            float(a),
+            1.5e5,
+            dt_s=1 / RATE_HZ,
+            low_pa=0.0,
+            high_pa=3e5,
+            floor_pa=0.0,
+            ceiling_pa=3e5,
+        )
+        - 1.5e5
+        for a in plan
+    ]
+    assert max(abs(c) for c in corrections) < 1.0  # Pa: nothing (rounding)
+    assert abs(fb.integral_pa) < 1.0
