@@ -33,6 +33,11 @@ SHIPPED_GAINS = "feedback"
 """Directory of the shipped feedback gains (tuned on the simulated rig's recorded steps)."""
 
 
+NO_SHIPPED_GREYBOX = (
+    "compensator 'greybox' needs the model directory that catheter-lab explain, add or core "
+    "wrote (model_dir): no grey box is shipped, it is your catheter's own"
+)
+
 COMPENSATOR_OF_KIND = {
     "static_map": "none",
     "idrdpi": "idrdpi",
@@ -81,6 +86,8 @@ def resolve_compensator(kind: str | None, model_dir: str) -> str:
     """
     if kind is not None and kind not in COMPENSATORS:
         raise ParameterError(f"unknown compensator {kind!r}; available: {', '.join(COMPENSATORS)}")
+    if kind == "greybox" and not model_dir:
+        raise ParameterError(NO_SHIPPED_GREYBOX)  # before anything starts, not at configure
     if not model_dir:
         return kind or DEFAULT_COMPENSATOR
     held = compensator_of_model_dir(model_dir)
@@ -232,10 +239,7 @@ def load_greybox(model_dir: str, max_pressure_pa: float = MAX_PRESSURE_PA) -> Mo
         ModelDirError: the directory is missing, malformed, or fails its hash check.
     """
     if not model_dir:
-        raise ParameterError(
-            "compensator 'greybox' needs the model directory that catheter-lab explain, add "
-            "or core wrote (model_dir): no grey box is shipped, it is your catheter's own"
-        )
+        raise ParameterError(NO_SHIPPED_GREYBOX)
     from catheter_models.models.greybox import GreyBox
     from catheter_models.models.greybox_inverse import GreyBoxInverse
 

@@ -165,3 +165,8 @@ def test_a_tick_costs_a_few_core_evaluations(cores) -> None:
         inverse.step(float(v))
         evaluations.append(inverse.core_evaluations)
     assert np.percentile(evaluations, 99) <= 25
+
+
+def test_greybox_without_a_model_directory_is_refused_before_anything_starts() -> None:
+    with pytest.raises(ParameterError, match="no grey box is shipped"):
+        resolve_compensator("greybox", "")
