@@ -267,3 +267,21 @@ def test_the_explained_chain_becomes_the_greybox_candidate(tmp_path: Path) -> No
     assert "idrdpi+zvd+pi" in names
     compensator = load_compensator("greybox", str(job.candidate_dir("greybox")))
     assert compensator.preview_s == pytest.approx(0.0506, abs=1e-4)
+
+
+def test_tune_takes_the_loop_s_shape_from_the_explained_chain(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import shutil
+
+    from foreign_plants import SUPPORT_DIR
+
+    ran: list[list[str]] = []
+    monkeypatch.setattr(cm, "run_lab", lambda argv, record: ran.append(argv))
+    job = _job(tmp_path)
+    job._tune("bags/train", steps.StepRecord())
+    assert "--chain" not in ran[-1]  # nothing explained yet: the steps alone
+    explained = job.out_dir / "forward" / "explain" / "step2"
+    shutil.copytree(SUPPORT_DIR / "foreign_plants" / "boucwen_delay_chain", explained)
+    job._tune("bags/train", steps.StepRecord())
+    assert ran[-1][ran[-1].index("--chain") + 1] == str(explained)
