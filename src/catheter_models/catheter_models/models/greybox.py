@@ -49,6 +49,7 @@ from catheter_models.models.base import (
     saved_rate_hz,
 )
 from catheter_models.models.blocks import FORMS, Block, block, ordered
+from catheter_models.models.blocks.base import Inverse
 from catheter_models.models.cores import CORES, Core, DRDPICore, FreePI, make_core, one_blas_thread
 from catheter_models.models.drdpi import DRDPI
 from catheter_models.models.evaluate import pooled_rmse
@@ -211,6 +212,38 @@ class GreyBox(Model):
             e: {p.name: v for p, v in zip(FORMS[e].params, self.blocks_[e], strict=True)}
             for e in self.effects
         }
+
+    @property
+    def fitted(self) -> bool:
+        """Whether the chain has been identified (or loaded)."""
+        return self._fitted_now()
+
+    def inverse_stages(self) -> tuple[list[Inverse], list[Inverse]]:
+        """Each block run backwards (:meth:`Block.inverse`), from rest.
+
+        The input side's and the output side's, each in chain order.
+
+        Raises:
+            ParameterError: blocks without an inverse, each named.
+        """
+        self._fitted()
+        stages: dict[str, Inverse] = {}
+        missing = []
+        for e in self.effects:
+            try:
+                stages[e] = self._blocks[e].inverse(self.rate_hz_, self.blocks_[e])
+            except NotImplementedError:
+                missing.append(e)
+        if missing:
+            raise ParameterError(
+                f"the chain {' -> '.join(self.chain)} cannot be compensated: "
+                f"{', '.join(missing)} has no inverse (Block.inverse); remove it or give it one"
+            )
+        side = {e: FORMS[e].side for e in self.effects}
+        return (
+            [stages[e] for e in self.effects if side[e] == "input"],
+            [stages[e] for e in self.effects if side[e] == "output"],
+        )
 
     def dead_time_s(self) -> float | None:
         """How far the bend lags the command through the chain's blocks [s], to first order.

@@ -48,7 +48,6 @@ import numpy.typing as npt
 from catheter_models.contract import MAX_PRESSURE_PA
 from catheter_models.errors import ParameterError
 from catheter_models.models.base import check_finite_step
-from catheter_models.models.blocks import FORMS
 from catheter_models.models.blocks.base import Inverse
 from catheter_models.models.cores.base import Core, CoreInverse
 from catheter_models.models.greybox import GreyBox
@@ -111,7 +110,7 @@ class GreyBoxInverse:
         min_pressure_pa: float = 0.0,
         max_pressure_pa: float = MAX_PRESSURE_PA,
     ) -> None:
-        if not model._fitted_now():
+        if not model.fitted:
             raise ParameterError("a grey box must be fitted before it can be inverted")
         if not (
             math.isfinite(min_pressure_pa)
@@ -127,17 +126,7 @@ class GreyBoxInverse:
         self.max_pressure_pa = float(max_pressure_pa)
         self.sample_period_s = 1.0 / model.rate_hz_
         self.chain = model.chain
-        missing = []
-        for e in model.effects:
-            try:
-                model._blocks[e].inverse(model.rate_hz_, model.blocks_[e])
-            except NotImplementedError:
-                missing.append(e)
-        if missing:
-            raise ParameterError(
-                f"the chain {' -> '.join(self.chain)} cannot be compensated: "
-                f"{', '.join(missing)} has no inverse (Block.inverse); remove it or give it one"
-            )
+        model.inverse_stages()  # a block without an inverse is refused here, by name
         self.reset()
         self.inversion_miss_deg = invertibility_deg(
             model.core_, model.rate_hz_, self._low_bar, self._high_bar
@@ -159,9 +148,9 @@ class GreyBoxInverse:
         """Back to rest: every stage's state as at the start of a recording."""
         m = self.model
         rate = m.rate_hz_
-        stages = {e: m._blocks[e].inverse(rate, m.blocks_[e]) for e in m.effects}
-        self._inputs: list[Inverse] = [stages[e] for e in m.effects if FORMS[e].side == "input"]
-        self._outputs: list[Inverse] = [stages[e] for e in m.effects if FORMS[e].side == "output"]
+        self._inputs: list[Inverse]
+        self._outputs: list[Inverse]
+        self._inputs, self._outputs = m.inverse_stages()
         self._low_bar = float(pa_to_bar(self.min_pressure_pa))
         self._high_bar = float(pa_to_bar(self.max_pressure_pa))
         self._core: CoreInverse = m.core_.inverse(rate, self._low_bar, self._high_bar)
