@@ -12,6 +12,7 @@ import itertools
 import os
 import signal
 import subprocess
+import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -64,6 +65,11 @@ def node_argv(module: str, params: Mapping[str, object] | None = None) -> list[s
     if spec.lifecycle:
         spec.params.setdefault("autostart", True)
     return spec.argv(DEFAULT_NAMESPACE)
+
+
+def follow_argv(*args: str) -> list[str]:
+    """``follow_trajectory`` with ``args``, as a person runs it, in this interpreter."""
+    return [sys.executable, "-m", "catheter_control.follow_trajectory", *args]
 
 
 def _stop(proc: subprocess.Popen[bytes], sig: int = signal.SIGINT, timeout_s: float = 10.0) -> int:

@@ -8,12 +8,19 @@ ahead as the chain needs, follows a thesis trajectory, and refuses a plan shorte
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
-from graph_utils import COMPENSATOR, Children, Probe, diagnostic_values, statuses, trajectory_msg
+from graph_utils import (
+    COMPENSATOR,
+    Children,
+    Probe,
+    diagnostic_values,
+    follow_argv,
+    statuses,
+    trajectory_msg,
+)
 from test_compensator import _send, _start_rig_and_compensator, _wait_ready
 from trajectory_msgs.msg import JointTrajectory
 
@@ -51,10 +58,7 @@ def test_follow_trajectory_runs_the_explained_chain_backwards(
     run_dir = tmp_path / "run"
     run = children.run(
         "follow_trajectory",
-        [
-            sys.executable,
-            "-m",
-            "catheter_control.follow_trajectory",
+        follow_argv(
             "--sim",
             "--compensator",
             "greybox",
@@ -65,7 +69,7 @@ def test_follow_trajectory_runs_the_explained_chain_backwards(
             "--out",
             str(run_dir),
             "--no-progress",
-        ],
+        ),
         timeout_s=150.0,
     )
     assert run.returncode == 0, f"exit {run.returncode}\n{run.stdout}\n{run.stderr}"

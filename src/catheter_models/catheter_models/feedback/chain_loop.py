@@ -27,14 +27,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from catheter_models.errors import SignalError
 from catheter_models.feedback.law import FeedbackGains
 from catheter_models.feedback.tune import (
-    GAIN_PERCENTILE,
     LoopModel,
     Margins,
     design,
     identify,
+    loop_of_shape,
     margins,
     plainly_stable,
     shape_fit,
@@ -112,21 +111,7 @@ def loop_from_chain(recordings: Sequence[Recording], chain: GreyBox) -> LoopMode
     if resonance:
         theta += [math.log(shape.resonance_hz), math.log(max(shape.resonance_damping, 1e-3))]
     ks, nrmse = shape_fit(u, y, mask, 1.0 / rate, np.asarray(theta), resonance=resonance)
-    positive = ks[ks > 0.0]
-    if positive.size == 0:
-        raise SignalError("tune: no step moved the bend up with the pressure: check the sign")
-    return LoopModel(
-        gain_rad_per_pa=float(np.percentile(positive, GAIN_PERCENTILE)),
-        gain_median_rad_per_pa=float(np.median(positive)),
-        time_constant_s=math.exp(theta[1]),
-        delay_s=math.exp(theta[0]),
-        resonance_hz=shape.resonance_hz,
-        resonance_damping=max(shape.resonance_damping, 1e-3) if resonance else 0.0,
-        fit_nrmse=nrmse,
-        n_steps=u.shape[0],
-        rate_hz=rate,
-        measurement_age_s=max(r.measurement_age_s for r in recordings),
-    )
+    return loop_of_shape(np.asarray(theta), ks, nrmse, recordings, rate, resonance=resonance)
 
 
 def _times_differ(a_s: float, b_s: float) -> bool:

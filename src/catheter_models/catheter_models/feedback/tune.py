@@ -357,6 +357,23 @@ def identify(recordings: Sequence[Recording]) -> LoopModel:
     # explains a tenth more of the responses.
     use_ring = err_ring < RESONANCE_GAIN * err_plain
     theta, ks, err = (ringing, ks_ring, err_ring) if use_ring else (plain, ks_plain, err_plain)
+    return loop_of_shape(theta, ks, err, recordings, rate, resonance=use_ring)
+
+
+def loop_of_shape(
+    theta: FloatArray,
+    ks: FloatArray,
+    nrmse: float,
+    recordings: Sequence[Recording],
+    rate_hz: float,
+    *,
+    resonance: bool,
+) -> LoopModel:
+    """The loop of shape ``theta`` (log delay, lag, and tip) with the steps' gains ``ks``.
+
+    Raises:
+        SignalError: no step's gain is positive (the bend fell as the pressure rose).
+    """
     positive = ks[ks > 0.0]
     if positive.size == 0:
         raise SignalError("tune: no step moved the bend up with the pressure: check the sign")
@@ -365,11 +382,11 @@ def identify(recordings: Sequence[Recording]) -> LoopModel:
         gain_median_rad_per_pa=float(np.median(positive)),
         time_constant_s=math.exp(theta[1]),
         delay_s=math.exp(theta[0]),
-        resonance_hz=math.exp(theta[2]) if use_ring else 0.0,
-        resonance_damping=math.exp(theta[3]) if use_ring else 0.0,
-        fit_nrmse=err,
-        n_steps=u_rows.shape[0],
-        rate_hz=rate,
+        resonance_hz=math.exp(theta[2]) if resonance else 0.0,
+        resonance_damping=math.exp(theta[3]) if resonance else 0.0,
+        fit_nrmse=nrmse,
+        n_steps=ks.size,
+        rate_hz=rate_hz,
         measurement_age_s=max(r.measurement_age_s for r in recordings),
     )
 
