@@ -23,8 +23,14 @@ with the per-tick compute of the grey box's inverse beside the c-LSTM's (ONNX Ru
     .venv/bin/python bench/bench_greybox_compensator.py                 # ~60 min, 2 jobs
     .venv/bin/python bench/bench_greybox_compensator.py --no-clstm     # ~25 min
     .venv/bin/python bench/bench_greybox_compensator.py --quick        # 2 cases, smoke run
+    .venv/bin/python bench/bench_greybox_compensator.py --timing       # per tick, ~3 min
 
 Writes ``bench/results/greybox_compensator.json``; ``--table FILE`` prints the docs' table.
+``--timing`` (run it on an idle machine: the cases' run shares the cores between two jobs)
+times one ``step`` of the grey box's inverse beside one of the shipped c-LSTM on ONNX
+Runtime, interleaved trajectory by trajectory in one process, on three of the cases' chains
+(a delay, a ringing tip, a lag with its flow limit), and writes
+``bench/results/greybox_timing.json``.
 """
 
 from __future__ import annotations
@@ -99,18 +105,7 @@ def lab_chain(case: Case, plant: str, hidden: tuple[str, ...], explain_here: boo
 
 def per_tick_us(ff: Any, trajectory: str) -> dict[str, float]:
     """Wall time of each ``step`` over a trajectory [µs]: median, p99, max."""
-    desired = np.asarray(get_preset(trajectory).generate(RATE_HZ).values_si)
-    ff.reset()
-    took = np.empty(desired.size)
-    for k, v in enumerate(desired):
-        start = time.perf_counter()
-        ff.step(float(v))
-        took[k] = time.perf_counter() - start
-    return {
-        "median_us": float(1e6 * np.median(took)),
-        "p99_us": float(1e6 * np.percentile(took, 99)),
-        "max_us": float(1e6 * took.max()),
-    }
+    return summary_us(step_times_us(ff, trajectory))
 
 
 def run_case(job: tuple[str, str, int, bool, float, bool]) -> dict[str, Any]:
@@ -217,6 +212,57 @@ def clstm_per_tick() -> dict[str, float]:
     return per_tick_us(load_compensator("clstm", ""), "traj_up_chirp")
 
 
+TIMING = RESULTS.with_name("greybox_timing.json")
+TIMING_CASES = (
+    ("maxwell_slip", "transport_delay", 1),
+    ("boucwen", "tip_dynamics", 1),
+    ("boucwen", "pneumatic_lag", 1001),
+)
+
+
+def timing() -> dict[str, Any]:
+    """Per-tick compute of the grey box's inverse beside the c-LSTM's (see the module)."""
+    clstm = load_compensator("clstm", "")
+    out: dict[str, Any] = {"cases": {}, "machine": {"cpus": os.cpu_count()}}
+    pooled: dict[str, list[float]] = {"greybox": [], "clstm": []}
+    for plant_name, hidden, seed in TIMING_CASES:
+        case = draw_case(PLANTS[plant_name], (hidden,), seed)
+        model = lab_chain(case, plant_name, (hidden,), explain_here=False)
+        inverse = GreyBoxInverse(model)
+        ff = ModelCompensator(inverse, inverse.preview_s, inverse.sample_period_s, "greybox")
+        row: dict[str, Any] = {"chain": list(model.chain)}
+        for trajectory in TEST_TRAJECTORIES:
+            for kind, comp in (("greybox", ff), ("clstm", clstm)):
+                took = step_times_us(comp, trajectory)
+                pooled[kind] += list(took)
+                row.setdefault(kind, {})[trajectory] = summary_us(took)
+        out["cases"][f"{plant_name}/{case.plant.variant} {hidden} seed {seed}"] = row
+        print(f"  {plant_name} {hidden}: {row['greybox']}", flush=True)
+    out["pooled"] = {kind: summary_us(np.asarray(v)) for kind, v in pooled.items()}
+    return out
+
+
+def step_times_us(ff: Any, trajectory: str) -> Any:
+    """Wall time of each ``step`` over a trajectory [µs]."""
+    desired = np.asarray(get_preset(trajectory).generate(RATE_HZ).values_si)
+    ff.reset()
+    took = np.empty(desired.size)
+    for k, v in enumerate(desired):
+        start = time.perf_counter()
+        ff.step(float(v))
+        took[k] = time.perf_counter() - start
+    return 1e6 * took
+
+
+def summary_us(took: Any) -> dict[str, float]:
+    """Median, p99 and max of per-step times [µs]."""
+    return {
+        "median_us": float(np.median(took)),
+        "p99_us": float(np.percentile(took, 99)),
+        "max_us": float(np.max(took)),
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--table", type=Path, help="print the docs' table from a results file")
@@ -228,12 +274,20 @@ def main() -> None:
     parser.add_argument("--hidden", nargs="+", default=list(HIDDEN), help="'' is nothing")
     parser.add_argument("--plants", nargs="+", default=list(PLANTS))
     parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--timing", action="store_true", help="per-tick compute only")
     parser.add_argument("--out", type=Path, default=RESULTS)
     args = parser.parse_args()
     if args.table is not None:
         results = json.loads(args.table.read_text())
         print(table(results))
         print(json.dumps(verdicts(results), indent=2))
+        return
+    if args.timing:
+        found = timing()
+        TIMING.parent.mkdir(parents=True, exist_ok=True)
+        TIMING.write_text(json.dumps(found, indent=2) + "\n")
+        print(json.dumps(found["pooled"], indent=2))
+        print(f"wrote {TIMING}")
         return
     with_clstm = not (args.no_clstm or args.quick)
     jobs = [
