@@ -22,6 +22,7 @@ with the per-tick compute of the grey box's inverse beside the c-LSTM's (ONNX Ru
 
     .venv/bin/python bench/bench_greybox_compensator.py                 # ~60 min, 2 jobs
     .venv/bin/python bench/bench_greybox_compensator.py --no-clstm     # ~25 min
+    .venv/bin/python bench/bench_greybox_compensator.py --clstm-on ''  # c-LSTM: nothing hidden
     .venv/bin/python bench/bench_greybox_compensator.py --quick        # 2 cases, smoke run
     .venv/bin/python bench/bench_greybox_compensator.py --timing       # per tick, ~3 min
 
@@ -268,6 +269,13 @@ def main() -> None:
     parser.add_argument("--table", type=Path, help="print the docs' table from a results file")
     parser.add_argument("--quick", action="store_true", help="2 cases, no c-LSTM")
     parser.add_argument("--no-clstm", action="store_true", help="leave the c-LSTM out")
+    parser.add_argument(
+        "--clstm-on",
+        nargs="+",
+        default=None,
+        metavar="HIDDEN",
+        help="train the c-LSTM only on cases with these hidden effects ('' is nothing hidden)",
+    )
     parser.add_argument("--explain", action="store_true", help="run the lab's explain here")
     parser.add_argument("--clstm-budget-s", type=float, default=120.0)
     parser.add_argument("--seeds", type=int, nargs="+", default=list(SEEDS))
@@ -290,8 +298,9 @@ def main() -> None:
         print(f"wrote {TIMING}")
         return
     with_clstm = not (args.no_clstm or args.quick)
+    clstm_on = set(args.hidden if args.clstm_on is None else args.clstm_on)
     jobs = [
-        (plant, hidden, seed, with_clstm, args.clstm_budget_s, args.explain)
+        (plant, hidden, seed, with_clstm and hidden in clstm_on, args.clstm_budget_s, args.explain)
         for seed in args.seeds
         for plant in args.plants
         for hidden in args.hidden
