@@ -257,7 +257,7 @@ class CompensatorNode(LifecycleLoopNode):
             self.shaping_kind = resolve_shaping(self._shaping_asked, self.model_dir)
             compensator = load_shaping(
                 self.shaping_kind,
-                load_compensator(self.kind, self.model_dir),
+                load_compensator(self.kind, self.model_dir, max_pressure_pa=self.pmax_pa),
                 self.gains_path,
                 self.model_dir,
             )

@@ -201,7 +201,9 @@ class ModelCompensator:
         return float(self._stream.step(angle_desired_rad))
 
 
-def load_compensator(kind: str, model_dir: str) -> StreamingCompensator:
+def load_compensator(
+    kind: str, model_dir: str, *, max_pressure_pa: float = MAX_PRESSURE_PA
+) -> StreamingCompensator:
     """Build the named compensator from a model directory ('' = the shipped one).
 
     A model is stepped at the rate it was fitted at whatever the control rate
@@ -214,7 +216,9 @@ def load_compensator(kind: str, model_dir: str) -> StreamingCompensator:
     if kind not in COMPENSATORS:
         raise ParameterError(f"unknown compensator {kind!r}; available: {', '.join(COMPENSATORS)}")
     if kind == "greybox":
-        return load_greybox(model_dir)
+        # The chain's inverse keeps the plant's state as the model sees it: it must know the
+        # clamp the node puts around its command.
+        return load_greybox(model_dir, max_pressure_pa)
     path = Path(model_dir) if model_dir else shipped_model_dir(SHIPPED[kind])
     if kind == "none":
         return StaticInverseCompensator(StaticMap.load(path))

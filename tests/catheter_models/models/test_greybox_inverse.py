@@ -170,3 +170,22 @@ def test_a_tick_costs_a_few_core_evaluations(cores) -> None:
 def test_greybox_without_a_model_directory_is_refused_before_anything_starts() -> None:
     with pytest.raises(ParameterError, match="no grey box is shipped"):
         resolve_compensator("greybox", "")
+
+
+def test_a_strong_rate_term_is_run_backwards_with_a_slower_filter_not_run_away(
+    cores, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import catheter_models.models.cores.base as core_base
+    from catheter_models.models.drdpi import DRDPIParams
+    from catheter_models.models.greybox_inverse import invertibility_deg
+
+    strong = cores["drdpi"].copy()
+    values = strong.params.to_dict()
+    values["beta"] = 0.06  # thresholds widen 60 ms of rate per bar: loop gain ~2 backwards
+    strong.set_params(DRDPIParams.from_dict(values))
+    gain_s, alpha = strong.rate_term(RATE_HZ)
+    assert gain_s * alpha * RATE_HZ > 1.5
+    slowed = invertibility_deg(strong, RATE_HZ, 0.0, 3.0)
+    monkeypatch.setattr(core_base, "MOST_RATE_LOOP_GAIN", math.inf)
+    as_fitted = invertibility_deg(strong, RATE_HZ, 0.0, 3.0)
+    assert slowed < 0.5 * as_fitted, (slowed, as_fitted)

@@ -152,7 +152,9 @@ class BoucWen(Core):
         out: FloatArray = self.columns(x, rate_hz, self.theta) @ self.weights
         return out
 
-    def stepper(self, rate_hz: float, *, lagged_rate: bool = False) -> tuple[FloatArray, StateStep]:
+    def stepper(
+        self, rate_hz: float, *, lagged_rate: bool = False, rate_alpha: float | None = None
+    ) -> tuple[FloatArray, StateStep]:
         """The Bouc-Wen state at rest, and the same kernel's one-sample step.
 
         Lagged (:meth:`Core.stepper`), the viscous term reads the rate held before.
@@ -160,7 +162,8 @@ class BoucWen(Core):
         if self.theta is None or self.weights is None:
             raise ModelError("boucwen core is not fitted")
         sample, cols = np.zeros(1), np.zeros((1, 4))
-        theta, weights, alpha = self.theta, self.weights, _alpha(rate_hz)
+        theta, weights = self.theta, self.weights
+        alpha = _alpha(rate_hz) if rate_alpha is None else rate_alpha
         w_s, w_z, w_s2, w_rate, w_0 = (float(w) for w in weights)
 
         def advance(x: float, state: FloatArray) -> float:
@@ -176,6 +179,13 @@ class BoucWen(Core):
             return float(w_s * c[0] + w_z * c[1] + w_s2 * c[2] + w_rate * rate + w_0)
 
         return np.zeros(4), advance_lagged if lagged_rate else advance
+
+    def rate_term(self, rate_hz: float) -> tuple[float, float]:
+        """The viscous weight over the pressure's weight [s], and the rate filter's factor."""
+        if self.weights is None:
+            raise ModelError("boucwen core is not fitted")
+        w_s, w_rate = abs(float(self.weights[0])), abs(float(self.weights[3]))
+        return (w_rate / w_s if w_s > 0.0 else 0.0), _alpha(rate_hz)
 
     def vector(self) -> FloatArray:
         """Shape and weights together."""

@@ -5,6 +5,7 @@ The law and its runner are the DRDPI model's own (ch. 5, :mod:`catheter_models.m
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
@@ -111,9 +112,14 @@ class DRDPICore(_ThesisCore):
         """Bend [deg] from rest."""
         return self._run_coef(self._coef_at(rate_hz), x)
 
-    def stepper(self, rate_hz: float, *, lagged_rate: bool = False) -> tuple[FloatArray, StateStep]:
+    def stepper(
+        self, rate_hz: float, *, lagged_rate: bool = False, rate_alpha: float | None = None
+    ) -> tuple[FloatArray, StateStep]:
         """The chain's state at rest, and its one-sample step (see :meth:`Core.stepper`)."""
         coef = self._coef_at(rate_hz)
+        if rate_alpha is not None:
+            coef = coef.copy()
+            coef[op.C_RATE_ALPHA] = rate_alpha
         sample, out = np.zeros(1), np.zeros(1)
         alpha = float(coef[op.C_RATE_ALPHA])
 
@@ -135,6 +141,19 @@ class DRDPICore(_ThesisCore):
             return float(out[0])
 
         return np.zeros(op.chain_state_size(coef)), advance_lagged if lagged_rate else advance
+
+    def rate_term(self, rate_hz: float) -> tuple[float, float]:
+        """The thresholds' rate factor [s] the inverse sees, and the rate filter's factor.
+
+        ``beta`` (eq. 5.6) times the plays' share of the loading slope: the input weight
+        ``a0`` does not lean on the rate.
+        """
+        if self.params is None:
+            raise ModelError("drdpi core is not fitted")
+        p = self.params.to_dict()
+        plays = sum(p["alpha0"] * math.exp(-p["beta0"] * i) for i in range(1, self.n_play + 1))
+        share = plays / (abs(p["a0"]) + plays) if plays > 0.0 else 0.0
+        return float(p["beta"]) * share, rate_alpha(self.rate_filter_s, rate_hz)
 
     def vector(self) -> FloatArray:
         """The free search coordinates of the DRDPI's box."""

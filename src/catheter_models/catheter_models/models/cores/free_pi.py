@@ -278,12 +278,16 @@ class FreePI(Core):
         )
         return out
 
-    def stepper(self, rate_hz: float, *, lagged_rate: bool = False) -> tuple[FloatArray, StateStep]:
+    def stepper(
+        self, rate_hz: float, *, lagged_rate: bool = False, rate_alpha: float | None = None
+    ) -> tuple[FloatArray, StateStep]:
         """The plays' state at rest, and the kernel's one-sample step (:meth:`Core.stepper`)."""
         if self.weights is None or self.beta_s is None:
             raise ModelError("free_pi core is not fitted")
         sample, out = np.zeros(1), np.zeros(1)
         args = self._kernel_args(rate_hz, self.beta_s)
+        if rate_alpha is not None:
+            args = (*args[:3], rate_alpha, *args[4:])
         weights, empty = self.weights, np.empty((0, 0))
         offsets, n_off, alpha = self._offsets, self.n_offsets, args[3]
 
@@ -305,6 +309,10 @@ class FreePI(Core):
             return y
 
         return self._state(), advance_lagged if lagged_rate else advance
+
+    def rate_term(self, rate_hz: float) -> tuple[float, float]:
+        """The thresholds' rate factor [s] and the rate filter's factor."""
+        return float(self.beta_s or 0.0), _alpha(rate_hz)
 
     def values(self) -> dict[str, Any]:
         """Rate factor, tension share and weights (the last weight is the constant)."""

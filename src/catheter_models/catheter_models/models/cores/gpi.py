@@ -65,7 +65,9 @@ class GPICore(_ThesisCore):
             raise ModelError("gpi core is not fitted")
         return run_gpi(self._coef(self.params), x)
 
-    def stepper(self, rate_hz: float, *, lagged_rate: bool = False) -> tuple[FloatArray, StateStep]:
+    def stepper(
+        self, rate_hz: float, *, lagged_rate: bool = False, rate_alpha: float | None = None
+    ) -> tuple[FloatArray, StateStep]:
         """The GPI's state at rest, and its one-sample step (rate-independent: no lag)."""
         if self.params is None:
             raise ModelError("gpi core is not fitted")
