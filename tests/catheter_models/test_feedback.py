@@ -194,6 +194,23 @@ def test_in_the_dead_band_the_integral_does_not_charge_and_a_rise_jumps_it() -> 
     assert fb.command(math.radians(3.0), 0.0, 0.3e5, **limits) == 0.5e5
 
 
+def test_an_opening_beyond_the_authority_is_not_wound_into_the_integral() -> None:
+    """A vented feedforward (0 bar: a chain's inverse in its deadband) and a set-point 0.5 deg
+    above the bend: the feedback jumps to the opening (0.77 bar), which its 0.5 bar authority
+    cuts to 0.5 bar. That cut is the jump's, not the PI's: back-calculated, it wound the
+    integral to -1 bar in 0.1 s, and the rise that followed came 4 deg late."""
+    gains = FeedbackGains(5.5e4, 2.5e6, opening_pressure_pa=0.77e5)
+    limits = {"dt_s": DT_S, "low_pa": 0.0, "high_pa": 3e5, "floor_pa": 0.0, "ceiling_pa": 3e5}
+    fb = PIDFeedback(gains, RATE_HZ)
+    for _ in range(25):
+        u = fb.command(math.radians(0.5), 0.0, 0.0, **limits)
+    assert u == pytest.approx(gains.max_correction_pa)  # as far as the authority lets it
+    assert fb.integral_pa >= 0.0
+    assert fb.at_authority_s == 0.0  # the jump is not the PI pressing on its bound
+    # Then the feedforward rises past the opening: the command follows it, not 1 bar below.
+    assert fb.command(math.radians(0.5), 0.0, 1.2e5, **limits) >= 1.2e5
+
+
 def test_an_untrusted_sample_holds_the_feedback_and_is_counted() -> None:
     fb = PIDFeedback(GAINS, RATE_HZ)
     for _ in range(50):

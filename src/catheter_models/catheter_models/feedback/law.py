@@ -316,7 +316,7 @@ class PIDFeedback:
         proportional = g.kp_pa_per_rad * error
         derivative = -g.kd_pa_s_per_rad * rate
         correction = proportional + self.integral_pa + derivative
-        wanted = ff_in + correction
+        wanted = pi_wanted = ff_in + correction
         if wanted < g.opening_pressure_pa and error > OPENING_ERROR_RAD:
             # The bend must rise but the command is where the muscle does nothing: go to the
             # edge of motion at once instead of charging the integral across the dead band
@@ -327,8 +327,14 @@ class PIDFeedback:
         applied = min(max(limited, low_pa), high_pa)
         if applied != wanted:
             self.saturated_ticks += 1
-        clamped_only = min(max(wanted, floor_pa), ceiling_pa)
-        self.at_authority_s = self.at_authority_s + dt_s if limited != clamped_only else 0.0
+        # The jump to the opening pressure is not the PI's own asking: what the authority
+        # cuts off it is neither wound into the integral nor counted as pressing on the
+        # authority. Back-calculated against it, a vented feedforward (the greybox in its
+        # deadband) with the opening 0.27 bar beyond the authority wound the integral to
+        # -1 bar in 0.1 s, and the next rise came 4 deg late.
+        pi_limited = min(max(pi_wanted, lo), hi)
+        clamped_only = min(max(pi_wanted, floor_pa), ceiling_pa)
+        self.at_authority_s = self.at_authority_s + dt_s if pi_limited != clamped_only else 0.0
         if g.ki_pa_per_rad_s > 0.0:
             push = g.ki_pa_per_rad_s * error
             shut = applied < g.opening_pressure_pa or (
@@ -340,7 +346,7 @@ class PIDFeedback:
                 push = 0.0  # the slew limit holds the command back: do not push against it
             # Back-calculation; never faster than a tick, or the correction would overshoot.
             tracking_s = max(g.tracking_time_s or g.integral_time_s, dt_s)
-            self.integral_pa += dt_s * (push + (limited - wanted) / tracking_s)
+            self.integral_pa += dt_s * (push + (pi_limited - pi_wanted) / tracking_s)
         self.last_feedback_pa = correction
         return applied
 

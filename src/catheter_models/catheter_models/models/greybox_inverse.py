@@ -31,13 +31,13 @@ inverse (a block a user added without one) is refused by name.
 **Which cores it inverts.** A sample-by-sample inverse needs the core's next bend to rise
 with this sample's pressure. The DRDPI's identification keeps every stage increasing (its
 monotone margin) and the GPI's play density is positive, so both invert to within 0.02 deg
-where their rate term is moderate (tests/catheter_models/models/test_greybox_inverse.py). A ``free_pi`` core's weights are
-free, and a fit may bend *more* at a lower pressure near a reversal (negative weights on
-the narrowest plays), and a ``boucwen`` fit may weigh its hysteretic state against the
-pressure: their inverse then jumps between branches. :func:`invertibility_deg` measures
-this on the core's own response to a smooth probe, and the constructor refuses a core that
-misses by more than :data:`MOST_INVERSION_MISS_DEG`, naming the number, rather than
-command jumps.
+where their rate term is moderate (tests/catheter_models/models/test_greybox_inverse.py).
+A ``free_pi`` core's weights are free, and a fit may bend *more* at a lower pressure near
+a reversal (negative weights on the narrowest plays), and a ``boucwen`` fit may weigh its
+hysteretic state against the pressure: their inverse then jumps between branches.
+:func:`invertibility_deg` measures this on the core's own response to a smooth probe, and
+the constructor refuses a core that misses by more than :data:`MOST_INVERSION_MISS_DEG`,
+naming the number, rather than command jumps.
 
 **A strong rate term.** Run backwards, a rate-dependent law can run away: the inverse's
 pressure widens the next sample's thresholds, which asks for more pressure
