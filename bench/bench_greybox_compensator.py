@@ -163,8 +163,8 @@ def run_case(job: tuple[str, str, int, bool, float, bool]) -> dict[str, Any]:
     return row
 
 
-def table(results: dict[str, Any]) -> str:
-    """The docs' table: mean RMSE over the four trajectories (worst in brackets)."""
+def table(results: dict[str, Any], key: str = "rmse_deg") -> str:
+    """The docs' table: mean ``key`` over the four trajectories (worst in brackets)."""
     cols = ["greybox ff", "greybox ff+pi", "idrdpi ff", "idrdpi ff+pi", "clstm ff", "clstm ff+pi"]
     lines = [
         "| case | chain the lab named | " + " | ".join(cols) + " |",
@@ -177,7 +177,7 @@ def table(results: dict[str, Any]) -> str:
             if runs is None:
                 cells.append("refused" if col.startswith("greybox") else "-")
                 continue
-            values = [r["rmse_deg"] for r in runs.values()]
+            values = [r[key] for r in runs.values()]
             cells.append(f"{np.mean(values):.2f} ({max(values):.2f})")
         part = "held out" if row["held_out"] else "dev"
         chain = " → ".join(row["chain"])
@@ -185,8 +185,12 @@ def table(results: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def verdicts(results: dict[str, Any]) -> dict[str, Any]:
-    """Issue 33's bars, case by case, and the misses named."""
+def verdicts(results: dict[str, Any], key: str = "rmse_deg") -> dict[str, Any]:
+    """Issue 33's bars on ``key``, case by case, and the misses named.
+
+    ``rmse_reachable_deg`` scores where the set-point is at least 1 deg: a catheter whose
+    friction holds it bent when vented cannot reach below that (docs/closed_loop.md).
+    """
     misses = []
     for row in results["rows"]:
         runs = row["trajectories"]
@@ -195,17 +199,17 @@ def verdicts(results: dict[str, Any]) -> dict[str, Any]:
             continue
         for col, bound in (("greybox ff", BOUND_FF_DEG), ("greybox ff+pi", BOUND_PI_DEG)):
             for trajectory, r in runs[col].items():
-                if not r["rmse_deg"] <= bound:
-                    misses.append(f"{row['label']}: {col} {trajectory} {r['rmse_deg']:.2f} deg")
+                if not r[key] <= bound:
+                    misses.append(f"{row['label']}: {col} {trajectory} {r[key]:.2f} deg")
         if row["hidden"] and row["hidden"][0] in ("transport_delay", "tip_dynamics"):
-            ours = np.mean([r["rmse_deg"] for r in runs["greybox ff+pi"].values()])
-            theirs = np.mean([r["rmse_deg"] for r in runs["idrdpi ff+pi"].values()])
+            ours = np.mean([r[key] for r in runs["greybox ff+pi"].values()])
+            theirs = np.mean([r[key] for r in runs["idrdpi ff+pi"].values()])
             if not ours <= 0.5 * theirs:
                 misses.append(
                     f"{row['label']}: greybox+PI {ours:.2f} deg not 50 % below "
                     f"IDRDPI+PI {theirs:.2f} deg"
                 )
-    return {"misses": misses, "met": not misses}
+    return {"scored_on": key, "misses": misses, "met": not misses}
 
 
 def clstm_per_tick() -> dict[str, float]:
@@ -287,8 +291,9 @@ def main() -> None:
     args = parser.parse_args()
     if args.table is not None:
         results = json.loads(args.table.read_text())
-        print(table(results))
-        print(json.dumps(verdicts(results), indent=2))
+        for key in ("rmse_deg", "rmse_reachable_deg"):
+            print(f"\n{key}:\n{table(results, key)}")
+            print(json.dumps(verdicts(results, key), indent=2))
         return
     if args.timing:
         found = timing()
@@ -324,6 +329,7 @@ def main() -> None:
             args.out.parent.mkdir(parents=True, exist_ok=True)
             args.out.write_text(json.dumps(results, indent=2) + "\n")
     results["verdicts"] = verdicts(results)
+    results["verdicts_reachable"] = verdicts(results, "rmse_reachable_deg")
     results["took_s"] = time.perf_counter() - started
     args.out.write_text(json.dumps(results, indent=2) + "\n")
     print(table(results))
