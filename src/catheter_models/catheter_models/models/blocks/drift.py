@@ -105,6 +105,13 @@ class Drift(Block):
         """The drift taken off the bend wanted, counted from the run's first sample."""
         return _DriftInverse(rate_hz, values)
 
+    def excitation_problem(self, inputs: Sequence[FloatArray], rate_hz: float) -> str:
+        """A trend needs time to tell apart from the hysteresis."""
+        longest_s = max((x.size / rate_hz for x in inputs), default=0.0)
+        if longest_s < 30.0:
+            return f"the longest recording lasts {longest_s:.0f} s: drift needs 30 s or more"
+        return ""
+
 
 class _DriftInverse(Inverse):
     """:meth:`Drift.streamer` backwards: the offset it will add now, subtracted."""
@@ -126,10 +133,3 @@ class _DriftInverse(Inverse):
         out = value + self._offset_deg()
         self._count += 1
         return out
-
-    def excitation_problem(self, inputs: Sequence[FloatArray], rate_hz: float) -> str:
-        """A trend needs time to tell apart from the hysteresis."""
-        longest_s = max((x.size / rate_hz for x in inputs), default=0.0)
-        if longest_s < 30.0:
-            return f"the longest recording lasts {longest_s:.0f} s: drift needs 30 s or more"
-        return ""
