@@ -211,10 +211,10 @@ class PIDFeedback:
             )
         self.gains = gains
         self._notch = _notch_coefficients(gains.notch_frequency_hz, gains.notch_damping, rate_hz)
-        self._notch_state = (0.0, 0.0)
-        self._reference = _SetPointFilter(self._notch, gains.measurement_filter_s)
+        # The bend and the set-point through the same filters: the error is the filtered error.
+        self._measured = _BendFilter(self._notch, gains.measurement_filter_s)
+        self._reference = _BendFilter(self._notch, gains.measurement_filter_s)
         self.integral_pa = 0.0
-        self._filtered_rad: float | None = None
         self._derivative_rad_s = 0.0
         self.untrusted_samples = 0
         """Ticks whose measurement was missing or non-finite (feedback held)."""
@@ -228,9 +228,8 @@ class PIDFeedback:
     def reset(self) -> None:
         """Forget the integral and the filters (a new run from rest)."""
         self.integral_pa = 0.0
-        self._filtered_rad = None
         self._derivative_rad_s = 0.0
-        self._notch_state = (0.0, 0.0)
+        self._measured.reset()
         self._reference.reset()
         self.last_feedback_pa = 0.0
         self.at_authority_s = 0.0
@@ -247,25 +246,13 @@ class PIDFeedback:
             "(a frozen, misplaced or misread laser?)"
         )
 
-    def _notched(self, x: float, first: bool) -> float:
-        """The measurement through the notch."""
-        if self._notch is None:
-            return x
-        y, self._notch_state = _biquad(self._notch, None if first else self._notch_state, x)
-        return y
-
     def _filter(self, measured_rad: float, dt_s: float) -> tuple[float, float]:
         """The measurement after the low-pass, and its filtered rate [rad/s]."""
         g = self.gains
-        previous = self._filtered_rad
-        measured_rad = self._notched(measured_rad, previous is None)
+        previous = self._measured.value
+        filtered = self._measured.step(measured_rad, dt_s)
         if previous is None:
-            self._filtered_rad = measured_rad
-            return measured_rad, 0.0
-        tau = g.measurement_filter_s
-        alpha = 1.0 if tau <= 0.0 else 1.0 - math.exp(-dt_s / tau)
-        filtered = previous + alpha * (measured_rad - previous)
-        self._filtered_rad = filtered
+            return filtered, 0.0
         if g.kd_pa_s_per_rad > 0.0:
             beta = 1.0 - math.exp(-dt_s / g.derivative_filter_s)
             rate = (filtered - previous) / dt_s
@@ -369,10 +356,11 @@ def _biquad(
     return y, (b1 * x - a1 * y + z2, b2 * x - a2 * y)
 
 
-class _SetPointFilter:
-    """The set-point through the measurement's notch and low-pass.
+class _BendFilter:
+    """A bend through the notch, then the first-order low-pass, each started at rest.
 
-    The error is then the filtered error, not the plan against a delayed bend (module doc).
+    The measured bend and the set-point each pass one, so the error is the filtered error,
+    not the plan against a delayed bend (module doc).
     """
 
     def __init__(self, notch: Biquad | None, tau_s: float) -> None:
@@ -382,17 +370,18 @@ class _SetPointFilter:
     def reset(self) -> None:
         """At rest: the next set-point starts the filters."""
         self._state: tuple[float, float] | None = None
-        self._filtered: float | None = None
+        self.value: float | None = None
+        """The last filtered bend (None at rest, before the first)."""
 
     def step(self, x: float, dt_s: float) -> float:
-        """The filtered set-point for this tick."""
+        """The filtered bend for this tick."""
         if self._notch is not None:
             x, self._state = _biquad(self._notch, self._state, x)
-        if self._filtered is None or self._tau_s <= 0.0:
-            self._filtered = x
+        if self.value is None or self._tau_s <= 0.0:
+            self.value = x
         else:
-            self._filtered += (1.0 - math.exp(-dt_s / self._tau_s)) * (x - self._filtered)
-        return self._filtered
+            self.value += (1.0 - math.exp(-dt_s / self._tau_s)) * (x - self.value)
+        return self.value
 
 
 def _notch_coefficients(

@@ -240,6 +240,21 @@ def _shape_response(theta: FloatArray, u: FloatArray, dt_s: float, resonance: bo
     return np.asarray((1.0 - frac) * padded[:, 1 : 1 + n] + frac * padded[:, :n])
 
 
+def _gains_and_residual(  # noqa: PLR0917 - the step rows and the shape, as _fit has them
+    theta: FloatArray,
+    u: FloatArray,
+    y: FloatArray,
+    mask: FloatArray,
+    dt_s: float,
+    resonance: bool,
+) -> tuple[FloatArray, FloatArray]:
+    """Each step's least-squares gain on the shape ``theta``, and the masked residual."""
+    r = _shape_response(theta, u, dt_s, resonance) * mask
+    rr = np.sum(r * r, axis=1)
+    ks = np.where(rr > 0.0, np.sum(r * y, axis=1) / np.where(rr > 0.0, rr, 1.0), 0.0)
+    return ks, ((y - ks[:, None] * r) * mask).ravel()
+
+
 def _fit(
     u: FloatArray, y: FloatArray, mask: FloatArray, dt_s: float, resonance: bool
 ) -> tuple[FloatArray, FloatArray, float]:
@@ -250,10 +265,7 @@ def _fit(
     """
 
     def gains_and_residual(theta: FloatArray) -> tuple[FloatArray, FloatArray]:
-        r = _shape_response(theta, u, dt_s, resonance) * mask
-        rr = np.sum(r * r, axis=1)
-        ks = np.where(rr > 0.0, np.sum(r * y, axis=1) / np.where(rr > 0.0, rr, 1.0), 0.0)
-        return ks, ((y - ks[:, None] * r) * mask).ravel()
+        return _gains_and_residual(theta, u, y, mask, dt_s, resonance)
 
     lower = [math.log(1e-4), math.log(1e-3)]
     upper = [math.log(0.3), math.log(2.0)]
@@ -334,10 +346,7 @@ def shape_fit(
     resonance: bool,
 ) -> tuple[FloatArray, float]:
     """Each step's gain and the normalised residual of the fixed shape ``theta`` (log values)."""
-    r = _shape_response(theta, u, dt_s, resonance) * mask
-    rr = np.sum(r * r, axis=1)
-    ks = np.where(rr > 0.0, np.sum(r * y, axis=1) / np.where(rr > 0.0, rr, 1.0), 0.0)
-    resid = (y - ks[:, None] * r) * mask
+    ks, resid = _gains_and_residual(theta, u, y, mask, dt_s, resonance)
     return ks, float(np.sqrt(np.sum(resid**2) / max(np.sum((y * mask) ** 2), 1e-300)))
 
 

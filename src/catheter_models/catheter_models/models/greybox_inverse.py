@@ -141,8 +141,7 @@ class GreyBoxInverse:
         self.max_pressure_pa = float(max_pressure_pa)
         self.sample_period_s = 1.0 / model.rate_hz_
         self.chain = model.chain
-        model.inverse_stages()  # a block without an inverse is refused here, by name
-        self.reset()
+        self.reset()  # a block without an inverse is refused here, by name
         self.inversion_miss_deg = invertibility_deg(
             model.core_, model.rate_hz_, self._low_bar, self._high_bar
         )

@@ -89,15 +89,21 @@ class Drift(Block):
         out[:, -1] += self.offset_deg(np.arange(m.shape[0]) / rate_hz, values)
         return out
 
+    @staticmethod
+    def offset_at_deg(t_s: float, values: Sequence[float]) -> float:
+        """:meth:`offset_deg` at one time [s], for a stream (no array a tick)."""
+        rate_deg_s, settle_s = math.degrees(values[0]), values[1]
+        t = min(t_s, settle_s)
+        return rate_deg_s * (t - t * t / (2.0 * settle_s))
+
     def streamer(self, rate_hz: float, values: Sequence[float]) -> Step:
         """The drift, one sample at a time (counted from the first)."""
-        rate_deg_s, settle_s = math.degrees(values[0]), values[1]
         count = [0]
 
         def step(x: float) -> float:
-            t = min(count[0] / rate_hz, settle_s)
+            t_s = count[0] / rate_hz
             count[0] += 1
-            return x + rate_deg_s * (t - t * t / (2.0 * settle_s))
+            return x + self.offset_at_deg(t_s, values)
 
         return step
 
@@ -121,8 +127,7 @@ class _DriftInverse(Inverse):
         self._count = 0
 
     def _offset_deg(self) -> float:
-        t = np.array([self._count / self._rate_hz])
-        return float(Drift.offset_deg(t, self._values)[0])
+        return Drift.offset_at_deg(self._count / self._rate_hz, self._values)
 
     def want(self, target: float) -> float:
         """The bend before the drift."""
