@@ -151,7 +151,8 @@ class GreyBoxInverse:
                 f"the {model.core_name} core of {' -> '.join(self.chain)} cannot be inverted "
                 f"sample by sample: on its own smooth response its inverse misses by "
                 f"{self.inversion_miss_deg:.2f} deg RMS (at most {MOST_INVERSION_MISS_DEG} deg): "
-                "the fitted law is not increasing in the pressure everywhere. Refit the chain "
+                "the fitted law is not increasing in the pressure everywhere, or its rate term is "
+                "too strong to run backwards. Refit the chain "
                 "with the drdpi or gpi core (catheter-lab core MODEL drdpi), or compensate with "
                 "idrdpi or clstm"
             )
