@@ -12,78 +12,29 @@ import ast
 import itertools
 import math
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 from foreign_plants.base import RANGES, Effect
 from foreign_plants.boucwen import BoucWenPlant, drift_offset_rad
+from plant_probes import (
+    BAR,
+    DT_S,
+    RATE_HZ,
+    hold,
+    loop_width_deg,
+    mean_time_s,
+    ramp,
+    sine_command,
+    step_command,
+)
 from scipy.signal import bilinear, butter, lfilter
-
-RATE_HZ = 250.0
-DT_S = 1.0 / RATE_HZ
-BAR = 1.0e5
 
 
 @pytest.fixture(scope="module")
 def plant() -> BoucWenPlant:
     return BoucWenPlant(0)
-
-
-def hold(pressure_pa: float, duration_s: float) -> np.ndarray:
-    return np.full(round(duration_s * RATE_HZ), pressure_pa)
-
-
-def ramp(p0_pa: float, p1_pa: float, duration_s: float) -> np.ndarray:
-    return np.linspace(p0_pa, p1_pa, round(duration_s * RATE_HZ), endpoint=False)
-
-
-def step_command(
-    p0_pa: float, p1_pa: float, before_s: float = 1.5, after_s: float = 2.0
-) -> tuple[np.ndarray, int]:
-    """Approach p0 in the step's direction (no friction reversal at the step), hold, step.
-
-    Returns the command and the index of the first sample at p1.
-    """
-    overshoot = -0.3 * BAR if p1_pa > p0_pa else 0.3 * BAR
-    parts = [
-        ramp(0.0, p0_pa + overshoot, 2.0),
-        ramp(p0_pa + overshoot, p0_pa, 0.5),
-        hold(p0_pa, before_s),
-    ]
-    k = sum(len(x) for x in parts)
-    return np.concatenate([*parts, hold(p1_pa, after_s)]), k
-
-
-def sine_command(f_hz: float, cycles: int, low_pa: float = 0.5 * BAR, high_pa: float = 2.5 * BAR):
-    t = np.arange(0.0, cycles / f_hz, DT_S)
-    mid, amp = 0.5 * (low_pa + high_pa), 0.5 * (high_pa - low_pa)
-    return t, mid - amp * np.cos(2.0 * np.pi * f_hz * t)
-
-
-def loop_width_deg(plant: BoucWenPlant, f_hz: float, effects: tuple[Effect, ...] = ()) -> float:
-    """Unloading minus loading bend at mid pressure, on the last of three sine cycles."""
-    t, cmd = sine_command(f_hz, 3)
-    bend = plant.bend_without_noise(cmd, RATE_HZ, effects)
-    last = t >= 2.0 / f_hz
-    phase = (t[last] * f_hz) % 1.0
-    c, y = cmd[last], bend[last]
-    up, down = phase < 0.5, phase >= 0.5
-    mid = 1.5 * BAR
-    y_up = np.interp(mid, c[up], y[up])
-    order = np.argsort(c[down])
-    y_down = np.interp(mid, c[down][order], y[down][order])
-    return math.degrees(y_down - y_up)
-
-
-def mean_time_s(bend: np.ndarray, k: int, window_s: float) -> float:
-    """Area above the normalised step response from sample k (its mean delay) [s]."""
-    before = bend[k - 1]
-    seg = bend[k : k + round(window_s * RATE_HZ)]
-    final = np.mean(seg[-round(0.1 * RATE_HZ) :])
-    r = (seg - before) / (final - before)
-    return float(np.sum(1.0 - r) * DT_S)
 
 
 # --- contract basics -------------------------------------------------------------------------
@@ -170,16 +121,6 @@ def test_no_effect_means_no_lag_creep_drift_or_ringing(plant: BoucWenPlant) -> N
     assert abs(bend[-1] - settled) < 0.02  # nothing slow after 0.1 s
     assert np.max(bend[k:]) - bend[-1] < 0.02  # no overshoot
     assert mean_time_s(np.radians(bend), k, 1.0) < 0.02  # fast valve and stiff structure
-
-
-def test_speed_of_a_280_s_recording(plant: BoucWenPlant) -> None:
-    t = np.arange(0.0, 280.0, DT_S)
-    cmd = 1.5 * BAR + 1.5 * BAR * np.sin(2 * np.pi * 0.3 * t) * np.sin(2 * np.pi * 0.01 * t)
-    effects = tuple(Effect(n, {k: v[1] for k, v in r.items()}) for n, r in RANGES.items())
-    plant.simulate(cmd[:100], RATE_HZ, effects)  # compiled
-    start = time.perf_counter()
-    plant.simulate(cmd, RATE_HZ, effects)
-    assert time.perf_counter() - start < 1.0
 
 
 @pytest.mark.parametrize("rate_hz", [100.0, 250.0, 1000.0])

@@ -43,7 +43,7 @@ GROUPS = [
 ]
 
 
-@pytest.mark.parametrize("plant_name", ["maxwell_slip", "boucwen"])
+@pytest.mark.parametrize("plant_name", ["maxwell_slip", "boucwen", "duhem"])
 @pytest.mark.parametrize("names", GROUPS, ids=lambda g: "+".join(g) or "nothing")
 def test_stepping_equals_simulating_the_whole_command(
     plant_name: str, names: tuple[str, ...]
@@ -62,7 +62,7 @@ def test_stepping_equals_simulating_the_whole_command(
     assert np.ptp(whole) > np.radians(5.0)
 
 
-@pytest.mark.parametrize("plant_name", ["maxwell_slip", "boucwen"])
+@pytest.mark.parametrize("plant_name", ["maxwell_slip", "boucwen", "duhem"])
 def test_a_stepper_starts_from_rest_each_time(plant_name: str) -> None:
     plant = PLANTS[plant_name](0)
     cmd = _command(300)

@@ -35,9 +35,10 @@ def pythonpath_with_support() -> str:
 
 def _plants() -> dict[str, type[ForeignPlant]]:
     from .boucwen import BoucWenPlant
+    from .duhem import DuhemPlant
     from .maxwell_slip import MaxwellSlipPlant
 
-    return {p.name: p for p in (MaxwellSlipPlant, BoucWenPlant)}
+    return {p.name: p for p in (MaxwellSlipPlant, BoucWenPlant, DuhemPlant)}
 
 
 def __getattr__(name: str) -> object:

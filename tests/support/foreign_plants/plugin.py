@@ -8,7 +8,7 @@ physics and sensor noise); the measured pressure comes from a valve and transmit
 here, apart from ``catheter_models.plant``: a first-order regulator (8 ms) limited to 0-3 bar,
 read by a transmitter with 400 Pa of white noise and a 10 Pa resolution.
 
-Factories: ``maxwell_slip``, ``boucwen`` (nothing hidden) and each with ``_lag``
+Factories: ``maxwell_slip``, ``boucwen``, ``duhem`` (nothing hidden) and each with ``_lag``
 (pneumatic lag), ``_delay`` (transport delay) or ``_tip`` (a ringing tip), every strength in
 the middle of :data:`~foreign_plants.base.RANGES`. Variant 0 of each plant, fixed seeds.
 """
@@ -58,7 +58,7 @@ class ForeignRigPlant:
     """A foreign plant with a valve: the rig's plant contract.
 
     Args:
-        plant_name: ``maxwell_slip`` or ``boucwen``.
+        plant_name: ``maxwell_slip``, ``boucwen`` or ``duhem``.
         effects: what the plant hides.
         rate_hz: its sample rate [Hz].
     """
@@ -124,6 +124,26 @@ def boucwen_tip() -> ForeignRigPlant:
     return ForeignRigPlant("boucwen", [_mid("tip_dynamics")])
 
 
+def duhem() -> ForeignRigPlant:
+    """Duhem catheter, nothing hidden."""
+    return ForeignRigPlant("duhem")
+
+
+def duhem_lag() -> ForeignRigPlant:
+    """Duhem catheter with a pneumatic lag."""
+    return ForeignRigPlant("duhem", [_mid("pneumatic_lag")])
+
+
+def duhem_delay() -> ForeignRigPlant:
+    """Duhem catheter with a transport delay."""
+    return ForeignRigPlant("duhem", [_mid("transport_delay")])
+
+
+def duhem_tip() -> ForeignRigPlant:
+    """Duhem catheter with a ringing tip."""
+    return ForeignRigPlant("duhem", [_mid("tip_dynamics")])
+
+
 FACTORIES: Final = (
     "maxwell_slip",
     "maxwell_slip_lag",
@@ -133,5 +153,9 @@ FACTORIES: Final = (
     "boucwen_lag",
     "boucwen_delay",
     "boucwen_tip",
+    "duhem",
+    "duhem_lag",
+    "duhem_delay",
+    "duhem_tip",
 )
 """Every factory of this module, by name."""
