@@ -207,6 +207,20 @@ def test_adequate_only_near_the_floors() -> None:
     text = far.text()
     assert "unexplained" in text and "20.0 x" in text and "plateau 0.900 deg" in text
     assert "keeps moving on plateaus" in text
+    assert "does better (0.300 deg against 1.000)" in text
+
+
+def test_a_model_worse_than_the_black_box_is_never_left_unsaid() -> None:
+    # Adequate by the noise (2.4x) yet the black box is clearly better: the verdict stands,
+    # and the text says that what is left is learnable.
+    adequate = _diagnosis(0.12, 0.05, 0.08)
+    assert adequate.verdict == "adequate"
+    assert "filter-bank black box does better (0.080 deg against 0.120)" in adequate.text()
+    assert adequate.to_dict()["floors"]["reference_does_better"] is True
+    # Within 1.1x of it: nothing to say.
+    close = _diagnosis(0.12, 0.05, 0.115)
+    assert "does better" not in close.text()
+    assert close.to_dict()["floors"]["reference_does_better"] is False
 
 
 def test_a_change_that_does_not_earn_its_place_is_shown_but_not_named() -> None:

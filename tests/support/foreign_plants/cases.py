@@ -114,6 +114,18 @@ def make_case(plant: ForeignPlant, effects: Sequence[Effect], seed: int) -> Case
     return Case(plant, tuple(effects), seed, recordings[0], recordings[1])
 
 
+def draw_twin_case(plant_cls: type[ForeignPlant], names: Sequence[str], seed: int) -> Case:
+    """A case whose catheter depends on the plant and ``seed`` alone, so that every case of
+    one seed is the same catheter with the same signals and noise: the case with nothing
+    hidden (``names`` empty) is the twin of each of them. Strengths are drawn by ``seed`` and
+    ``names`` as in :func:`draw_case` (which draws the variant from the names too, and so
+    has no twins; its cases are kept as they were for the earlier tables)."""
+    variant_rng = np.random.default_rng([seed, *(ord(c) for c in plant_cls.name)])
+    plant = plant_cls(variant=int(variant_rng.integers(0, 1_000)))
+    rng = np.random.default_rng([seed, len(names), *(ord(c) for n in names for c in n)])
+    return make_case(plant, [Effect.draw(n, rng) for n in names], seed)
+
+
 def draw_case(plant_cls: type[ForeignPlant], names: Sequence[str], seed: int) -> Case:
     """A case with ``names`` hidden at strengths drawn from the real-rig ranges by ``seed``,
     on the plant variant ``seed`` draws too."""

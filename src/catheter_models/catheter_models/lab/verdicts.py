@@ -116,6 +116,11 @@ class Floors:
             self.reference_deg
         )
 
+    def beaten_by_reference(self, rmse_deg: float) -> bool:
+        """Whether the black box is clearly better: ``rmse_deg`` above :data:`NEAR_REFERENCE`
+        times its error, so what is left is learnable from the pressure."""
+        return math.isfinite(self.reference_deg) and not self.near_reference(rmse_deg)
+
     def text(self, rmse_deg: float) -> str:
         """``0.46 deg = 7.5 x the noise floor (0.061 deg); black box 0.41 deg``."""
         parts = [f"noise floor {self.noise_deg:.3f} deg (model {rmse_deg / self.noise_deg:.1f} x)"]
@@ -233,12 +238,16 @@ class Diagnosis:
                 f"({self.floors.text(self.rmse_test_deg)}), and no change removes "
                 f"{100 * MIN_REDUCTION:.0f} % of the held-out error"
             )
+            if self.floors.beaten_by_reference(self.rmse_test_deg):
+                lines.append(self._beaten_line())
         else:
             lines.append(
                 f"  verdict: unexplained: {self.floors.text(self.rmse_test_deg)}; no catalogue "
                 "change earns its place"
             )
-            if self.floors.near_reference(self.rmse_test_deg):
+            if self.floors.beaten_by_reference(self.rmse_test_deg):
+                lines.append(self._beaten_line())
+            elif self.floors.near_reference(self.rmse_test_deg):
                 # A black box that does no better does not make the model adequate: the rest
                 # is far from the sensor's noise, only not learnable from the pressure alone.
                 lines.append(
@@ -252,6 +261,15 @@ class Diagnosis:
                 lines.append(f"    residual signature: {'; '.join(self.signature)}")
         return "\n".join(lines)
 
+    def _beaten_line(self) -> str:
+        # Never worse than the black box without a word: what it learns, a physical
+        # model could too; the catalogue or the core lacks it.
+        return (
+            f"    the {self.floors.reference} does better ({self.floors.reference_deg:.3f} deg "
+            f"against {self.rmse_test_deg:.3f}): what is left follows from the pressure, and "
+            "neither the catalogue nor the core's law captures it"
+        )
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready."""
         return {
@@ -264,6 +282,7 @@ class Diagnosis:
                 "noise_deg": self.floors.noise_deg,
                 "reference_deg": self.floors.reference_deg,
                 "reference": self.floors.reference,
+                "reference_does_better": self.floors.beaten_by_reference(self.rmse_test_deg),
             },
             "regimes_deg": self.regimes_deg,
             "signature": self.signature,
