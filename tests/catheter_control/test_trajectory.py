@@ -9,13 +9,16 @@ import pytest
 from catheter_control.trajectory import (
     TrajectoryLimits,
     TrajectoryPlan,
+    hermite,
+    lead_in_knots,
     load_trajectory_file,
     preset_knots,
+    preset_trajectory,
     with_lead_in,
 )
 from catheter_models.contract import MAX_TRAJECTORY_FILE_BYTES
 from catheter_models.errors import SignalError
-from catheter_models.signals import TEST_TRAJECTORIES
+from catheter_models.signals import TEST_TRAJECTORIES, get_preset
 
 LIM = TrajectoryLimits()
 
@@ -173,3 +176,64 @@ def test_follow_trajectory_refuses_a_huge_file_before_anything_starts(
     err = capsys.readouterr().err
     assert "trajectory refused" in err and "MAX_TRAJECTORY_FILE_BYTES" in err, err
     assert not (tmp_path / "run").exists()
+
+
+def test_hermite_segments_reproduce_the_polynomials_of_their_order() -> None:
+    t = np.array([0.0, 0.4, 1.0, 1.7])
+    at = np.linspace(0.0, 1.7, 171)
+    cubic = lambda x: 0.3 - 0.2 * x + 0.5 * x**2 - 0.1 * x**3  # noqa: E731
+    d_cubic = lambda x: -0.2 + x - 0.3 * x**2  # noqa: E731
+    np.testing.assert_allclose(hermite(t, cubic(t), d_cubic(t), None, at), cubic(at), atol=1e-12)
+    quintic = lambda x: 0.1 + 0.2 * x - 0.3 * x**3 + 0.05 * x**5  # noqa: E731
+    d1 = lambda x: 0.2 - 0.9 * x**2 + 0.25 * x**4  # noqa: E731
+    d2 = lambda x: -1.8 * x + 1.0 * x**3  # noqa: E731
+    np.testing.assert_allclose(hermite(t, quintic(t), d1(t), d2(t), at), quintic(at), atol=1e-12)
+    # Positions alone: straight lines, as before.
+    np.testing.assert_allclose(hermite(t, quintic(t), None, None, at), np.interp(at, t, quintic(t)))
+
+
+@pytest.mark.parametrize("name", TEST_TRAJECTORIES)
+def test_a_preset_s_plan_is_the_preset_with_no_kink_at_its_knots(name: str) -> None:
+    """Knotted at 50 Hz with their rates and accelerations, the thesis trajectories come out
+    of the plan as the presets themselves; as a polyline their acceleration was an impulse at
+    every knot, which rang a ringing tip through the grey box's inverse (issue 30)."""
+    knots = lead_in_knots(preset_trajectory(name))
+    smooth = knots.plan(LIM, 250.0, name)
+    desired = np.asarray(get_preset(name).generate(250.0).values_si)[:-1]
+    at = knots.lead_s + np.arange(desired.size) / 250.0
+    got = np.array([smooth.desired_at(x) for x in at])
+    # Inside: the trajectory's own joints (the lead-in's hold to its start, its end held)
+    # are where its acceleration really jumps.
+    inside = slice(10, -10)
+    assert np.max(np.abs(np.degrees(got - desired))[inside]) < 0.005
+    assert np.min(got) >= 0.0  # curved segments do not swing below a knot at rest
+    accel = (np.diff(got, 2) * 250.0**2)[inside]
+    accel_true = (np.diff(desired, 2) * 250.0**2)[inside]
+    # Compared sample by sample: all but the few samples at the preset's own corners (the
+    # small-variations trajectory has some) within 1 % of its largest acceleration; as a
+    # polyline, one sample in ten is off by a third of it or more.
+    scale = np.max(np.abs(accel_true))
+    assert np.percentile(np.abs(accel - accel_true), 99) < 0.01 * scale
+    polyline = TrajectoryPlan.from_knots(knots.t_s, knots.angle_rad, LIM, 250.0, name)
+    kinked = (np.diff([polyline.desired_at(x) for x in at], 2) * 250.0**2)[inside]
+    assert np.percentile(np.abs(kinked - accel_true), 90) > 0.3 * scale
+
+
+def test_rates_and_accelerations_must_come_whole() -> None:
+    t, a = [0.0, 1.0, 2.0], np.radians([0.0, 5.0, 5.0])
+    with pytest.raises(SignalError, match="accelerations without velocities"):
+        TrajectoryPlan.from_knots(t, a, LIM, 250.0, accel_rad_s2=[0.0, 0.0, 0.0])
+    with pytest.raises(SignalError, match="2 velocities for 3 points"):
+        TrajectoryPlan.from_knots(t, a, LIM, 250.0, velocity_rad_s=[0.0, 0.0])
+    with pytest.raises(SignalError, match="point 1: velocity is nan"):
+        TrajectoryPlan.from_knots(t, a, LIM, 250.0, velocity_rad_s=[0.0, math.nan, 0.0])
+
+
+def test_the_goal_sent_carries_the_knots_rates_and_accelerations() -> None:
+    from catheter_control.trajectory_client import _goal
+
+    plan = lead_in_knots(preset_trajectory("traj_down_chirp")).plan(LIM, 250.0, "down")
+    points = _goal(plan).trajectory.points
+    assert len(points) == plan.t_s.size
+    assert [p.velocities[0] for p in points] == pytest.approx(plan.velocity_rad_s)
+    assert [p.accelerations[0] for p in points] == pytest.approx(plan.accel_rad_s2)

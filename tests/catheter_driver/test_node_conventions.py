@@ -146,6 +146,16 @@ def test_the_compensator_moves_nothing_until_activated_and_configure_names_a_bad
         assert "not active" in str(node.plan_trajectory(_trajectory()))
         assert node.trigger_activate() == TransitionCallbackReturn.SUCCESS
         assert node.plan_trajectory(_trajectory()).duration_s == pytest.approx(2.0)
+        # Rates on every point: the knots are joined by a cubic, as ros2_controllers does.
+        with_rates = _trajectory()
+        for point in with_rates.points:
+            point.velocities = [0.0]
+        cubic = node.plan_trajectory(with_rates)
+        assert cubic.velocity_rad_s is not None
+        assert cubic.desired_at(0.5) == pytest.approx(0.1 * (3 * 0.25**2 - 2 * 0.25**3))
+        # On some points only: refused, naming the first point that differs.
+        with_rates.points[1].velocities = []
+        assert "point 1 lacks velocities" in str(node.plan_trajectory(with_rates))
         assert node.trigger_deactivate() == TransitionCallbackReturn.SUCCESS
         assert node.active_loop is None
     with built(CompensatorNode, "-p", f"model_dir:={tmp_path}") as node:

@@ -67,9 +67,8 @@ from catheter_control.graph_domain import (
 from catheter_control.models import COMMISSIONED_FILE
 from catheter_control.trajectory import (
     TrajectoryLimits,
-    TrajectoryPlan,
-    preset_knots,
-    with_lead_in,
+    lead_in_knots,
+    preset_trajectory,
 )
 from catheter_models.bag.space import DiskSpaceError, check_free_space
 from catheter_models.contract import CONTROL_RATE_HZ, DEFAULT_NAMESPACE, SENSOR_RATE_HZ
@@ -522,11 +521,9 @@ class Commission:
         from catheter_control import tracking_report as report
 
         self.ensure_rig()
-        t_s, angle_rad = preset_knots(trajectory)
-        t_s, angle_rad, lead_s = with_lead_in(t_s, angle_rad, LEAD_IN_S, LEAD_IN_S)
-        plan = TrajectoryPlan.from_knots(
-            t_s, angle_rad, TrajectoryLimits(), self.control_rate_hz, trajectory
-        )
+        knots = lead_in_knots(preset_trajectory(trajectory), LEAD_IN_S, LEAD_IN_S)
+        lead_s = knots.lead_s
+        plan = knots.plan(TrajectoryLimits(), self.control_rate_hz, trajectory)
         record.commands.append(
             f"follow_trajectory --preset {trajectory} --model-dir {candidate.model_dir} "
             f"--compensator {candidate.compensator} --feedback pi --feedback-gains "

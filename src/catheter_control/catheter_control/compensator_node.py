@@ -445,8 +445,31 @@ class CompensatorNode(LifecycleLoopNode):
                 return f"point {i} has no position for {BEND_JOINT!r}"
             times.append(point.time_from_start.sec + point.time_from_start.nanosec * 1e-9)
             angles.append(point.positions[j])
+        # Rates and accelerations, as ros2_controllers takes them: on every point or none.
+        derivatives: dict[str, list[float] | None] = {}
+        for field in ("velocities", "accelerations"):
+            given = [len(getattr(point, field)) > j for point in msg.points]
+            if any(given) and not all(given):
+                first = given.index(not given[0])
+                return (
+                    f"point {first} {'has' if given[first] else 'lacks'} {field} for "
+                    f"{BEND_JOINT!r} that point 0 {'lacks' if given[first] else 'has'}: give "
+                    f"{field} on every point or on none"
+                )
+            derivatives[field] = (
+                [float(getattr(point, field)[j]) for point in msg.points]
+                if given and all(given)
+                else None
+            )
         try:
-            plan = TrajectoryPlan.from_knots(times, angles, self.limits, self.rate_hz)
+            plan = TrajectoryPlan.from_knots(
+                times,
+                angles,
+                self.limits,
+                self.rate_hz,
+                velocity_rad_s=derivatives["velocities"],
+                accel_rad_s2=derivatives["accelerations"],
+            )
         except CatheterError as exc:
             return str(exc)
         preview_s = float(getattr(self.core.compensator, "preview_s", 0.0))

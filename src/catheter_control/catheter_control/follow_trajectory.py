@@ -56,8 +56,9 @@ from catheter_control.local_graph import (
 from catheter_control.trajectory import (
     TrajectoryLimits,
     TrajectoryPlan,
+    lead_in_knots,
     load_trajectory_file,
-    preset_knots,
+    preset_trajectory,
     with_lead_in,
 )
 from catheter_models.bag.space import (
@@ -308,8 +309,13 @@ def _load(args: argparse.Namespace) -> _Trajectory:
         signal_params: dict[str, object] = {"file": str(args.file)}
     else:
         name = args.preset
-        t_s, angle_rad = preset_knots(name)
-        signal_params = dict(get_preset(name).params())
+        # With its rate and acceleration at the knots: joined by quintic segments, the plan
+        # is the preset itself, not a polyline.
+        knots = preset_trajectory(name)
+        if args.lead_in_s > 0.0:
+            knots = lead_in_knots(knots, args.lead_in_s, args.lead_in_s)
+        plan = knots.plan(TrajectoryLimits(), args.control_rate_hz, name)
+        return _Trajectory(plan, name, dict(get_preset(name).params()), knots.lead_s)
     lead_s = 0.0
     if args.lead_in_s > 0.0:
         t_s, angle_rad, lead_s = with_lead_in(t_s, angle_rad, args.lead_in_s, args.lead_in_s)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import csv
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -51,13 +51,70 @@ class TrajectoryLimits:
         return None
 
 
+def hermite(
+    t_s: FloatArray,
+    angle_rad: FloatArray,
+    velocity_rad_s: FloatArray | None,
+    accel_rad_s2: FloatArray | None,
+    at_s: FloatArray,
+) -> FloatArray:
+    """The trajectory between its knots at ``at_s`` (held at the ends).
+
+    As ros2_controllers' joint trajectory controller interpolates: linear with positions
+    alone, cubic Hermite with velocities, quintic Hermite with velocities and accelerations
+    (continuous acceleration, so a compensator that reads the plan's acceleration sees no
+    impulse at every knot).
+    """
+    at = np.clip(np.asarray(at_s, dtype=float), t_s[0], t_s[-1])
+    if velocity_rad_s is None:
+        return np.asarray(np.interp(at, t_s, angle_rad), dtype=float)
+    i = np.clip(np.searchsorted(t_s, at, side="right") - 1, 0, t_s.size - 2)
+    h = t_s[i + 1] - t_s[i]
+    s = (at - t_s[i]) / h
+    p0, p1 = angle_rad[i], angle_rad[i + 1]
+    v0, v1 = velocity_rad_s[i] * h, velocity_rad_s[i + 1] * h
+    s2, s3 = s * s, s * s * s
+    if accel_rad_s2 is None:
+        return np.asarray(
+            (2 * s3 - 3 * s2 + 1) * p0
+            + (s3 - 2 * s2 + s) * v0
+            + (-2 * s3 + 3 * s2) * p1
+            + (s3 - s2) * v1,
+            dtype=float,
+        )
+    a0, a1 = accel_rad_s2[i] * h * h, accel_rad_s2[i + 1] * h * h
+    s4, s5 = s3 * s, s3 * s2
+    return np.asarray(
+        (1 - 10 * s3 + 15 * s4 - 6 * s5) * p0
+        + (s - 6 * s3 + 8 * s4 - 3 * s5) * v0
+        + (0.5 * s2 - 1.5 * s3 + 1.5 * s4 - 0.5 * s5) * a0
+        + (0.5 * s3 - s4 + 0.5 * s5) * a1
+        + (-4 * s3 + 7 * s4 - 3 * s5) * v1
+        + (10 * s3 - 15 * s4 + 6 * s5) * p1,
+        dtype=float,
+    )
+
+
 @dataclass(frozen=True)
 class TrajectoryPlan:
-    """A validated trajectory: knot times from its start [s] and desired bend [rad]."""
+    """A validated trajectory: knot times from its start [s] and desired bend [rad].
+
+    And the bend's rate [rad/s] and acceleration [rad/s^2] at the knots where the sender
+    gave them (then the knots are joined by :func:`hermite` segments).
+    """
 
     t_s: FloatArray
     angle_rad: FloatArray
     name: str = ""
+    velocity_rad_s: FloatArray | None = None
+    accel_rad_s2: FloatArray | None = None
+    _range_rad: tuple[float, float] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        # Curved segments may swing past a knot (by microdegrees on a smooth trajectory); the
+        # plan never leaves the range its knots span, which the limits were checked on.
+        low, high = float(np.min(self.angle_rad)), float(np.max(self.angle_rad))
+        object.__setattr__(self, "_range_rad", (low, high))
 
     @property
     def duration_s(self) -> float:
@@ -72,8 +129,14 @@ class TrajectoryPlan:
         limits: TrajectoryLimits,
         control_rate_hz: float,
         name: str = "",
+        *,
+        velocity_rad_s: npt.ArrayLike | None = None,
+        accel_rad_s2: npt.ArrayLike | None = None,
     ) -> TrajectoryPlan:
         """Validate knots as the controller will follow them: resampled on the control clock.
+
+        With velocities the knots are joined by cubic, with accelerations too by quintic
+        Hermite segments (:func:`hermite`); accelerations need velocities.
 
         Raises:
             SignalError: too many points or too long, non-finite, out of range,
@@ -89,7 +152,23 @@ class TrajectoryPlan:
             raise SignalError(
                 f"trajectory needs matching, non-empty times and angles (got {t.size}, {a.size})"
             )
-        for label, arr in (("time_from_start", t), ("angle", a)):
+        v = None if velocity_rad_s is None else np.asarray(velocity_rad_s, dtype=float).ravel()
+        acc = None if accel_rad_s2 is None else np.asarray(accel_rad_s2, dtype=float).ravel()
+        if acc is not None and v is None:
+            raise SignalError("trajectory has accelerations without velocities; give both")
+        for label, arr in (("velocities", v), ("accelerations", acc)):
+            if arr is not None and arr.shape != t.shape:
+                raise SignalError(
+                    f"trajectory has {arr.size} {label} for {t.size} points; give one per point "
+                    "or none"
+                )
+        named = [("time_from_start", t), ("angle", a)]
+        named += [
+            (label, arr)
+            for label, arr in (("velocity", v), ("acceleration", acc))
+            if arr is not None
+        ]
+        for label, arr in named:
             bad = np.flatnonzero(~np.isfinite(arr))
             if bad.size:
                 i = int(bad[0])
@@ -116,6 +195,8 @@ class TrajectoryPlan:
             # The plan starts at rest (straight) at t = 0 and moves to the first point.
             t = np.concatenate([[0.0], t])
             a = np.concatenate([[limits.min_angle_rad], a])
+            v = None if v is None else np.concatenate([[0.0], v])
+            acc = None if acc is None else np.concatenate([[0.0], acc])
         if t.size == 1:
             raise SignalError(
                 "trajectory has a single point at time_from_start 0: a step with no time to "
@@ -135,7 +216,7 @@ class TrajectoryPlan:
                     grid = np.delete(grid, -2)  # no sliver interval at the end
                 check_trajectory(
                     grid,
-                    np.interp(grid, t, a),
+                    np.clip(hermite(t, a, v, acc, grid), np.min(a), np.max(a)),
                     limits.max_angle_rad,
                     check_rate,
                     check_accel,
@@ -147,11 +228,15 @@ class TrajectoryPlan:
                 f"trajectory time_from_start must increase strictly: point {i} at {t[i]} s "
                 f"follows {t[i - 1]} s"
             )
-        return cls(t_s=t, angle_rad=a, name=name)
+        return cls(t_s=t, angle_rad=a, name=name, velocity_rad_s=v, accel_rad_s2=acc)
 
     def desired_at(self, elapsed_s: float) -> float:
         """Desired bend [rad] at ``elapsed_s`` from the start (held at the ends)."""
-        return float(np.interp(elapsed_s, self.t_s, self.angle_rad))
+        if self.velocity_rad_s is None:
+            return float(np.interp(elapsed_s, self.t_s, self.angle_rad))
+        at = np.array([elapsed_s])
+        value = hermite(self.t_s, self.angle_rad, self.velocity_rad_s, self.accel_rad_s2, at)[0]
+        return min(max(float(value), self._range_rad[0]), self._range_rad[1])
 
 
 def load_trajectory_file(
@@ -263,3 +348,75 @@ def preset_knots(name: str, rate_hz: float = 50.0) -> tuple[FloatArray, FloatArr
         raise SignalError(f"preset {name!r} is a {spec.kind} signal, not an angle trajectory")
     signal = spec.generate(rate_hz)
     return signal.t_s, signal.values_si
+
+
+_DERIVATIVE_RATE_HZ = 2000.0
+"""Rate at which a preset is generated to take its knots' rates and accelerations."""
+
+
+@dataclass(frozen=True)
+class Knots:
+    """A trajectory's knots with the bend's rate and acceleration at each.
+
+    For Hermite segments; ``lead_s`` is when the trajectory itself starts after a lead-in.
+    """
+
+    t_s: FloatArray
+    angle_rad: FloatArray
+    velocity_rad_s: FloatArray
+    accel_rad_s2: FloatArray
+    lead_s: float = 0.0
+
+    def plan(self, limits: TrajectoryLimits, control_rate_hz: float, name: str) -> TrajectoryPlan:
+        """The validated plan, joined by quintic Hermite segments."""
+        return TrajectoryPlan.from_knots(
+            self.t_s,
+            self.angle_rad,
+            limits,
+            control_rate_hz,
+            name,
+            velocity_rad_s=self.velocity_rad_s,
+            accel_rad_s2=self.accel_rad_s2,
+        )
+
+
+def preset_trajectory(name: str, rate_hz: float = 50.0) -> Knots:
+    """A thesis trajectory preset (sec. 9.3) knotted at ``rate_hz``, with rate and acceleration.
+
+    Between the knots the plan is then the preset (to microdegrees), not a polyline with a
+    kink at every knot: a compensator that reads the plan's acceleration, such as the grey
+    box's tip inverse, would see an impulse at every kink.
+    """
+    t_s, angle_rad = preset_knots(name, rate_hz)
+    fine = get_preset(name).generate(_DERIVATIVE_RATE_HZ)
+    t_fine = np.asarray(fine.t_s)
+    rate = np.gradient(np.asarray(fine.values_si), t_fine)
+    accel = np.gradient(rate, t_fine)
+    return Knots(t_s, angle_rad, np.interp(t_s, t_fine, rate), np.interp(t_s, t_fine, accel))
+
+
+def lead_in_knots(
+    knots: Knots, approach_s: float = 1.0, settle_s: float = 1.0, rate_hz: float = 50.0
+) -> Knots:
+    """:func:`with_lead_in` for knots with rates and accelerations.
+
+    The raised cosine's own (analytic) rate and acceleration on the lead-in's knots, zero
+    while it holds.
+    """
+    t, a, lead_s = with_lead_in(knots.t_s, knots.angle_rad, approach_s, settle_s, rate_hz)
+    if lead_s == 0.0:
+        return knots
+    n_lead = t.size - knots.t_s.size
+    tl = t[:n_lead]
+    moving = tl <= approach_s
+    w = np.pi / approach_s
+    start = float(knots.angle_rad[0])
+    v = np.where(moving, 0.5 * start * w * np.sin(w * tl), 0.0)
+    acc = np.where(moving, 0.5 * start * w * w * np.cos(w * tl), 0.0)
+    return Knots(
+        t,
+        a,
+        np.concatenate([v, knots.velocity_rad_s]),
+        np.concatenate([acc, knots.accel_rad_s2]),
+        lead_s,
+    )

@@ -405,9 +405,15 @@ def _goal(plan: TrajectoryPlan) -> Any:
     """The plan's knots as a FollowJointTrajectory goal for the bend joint."""
     goal = FollowJointTrajectory.Goal()
     goal.trajectory.joint_names = [BEND_JOINT]
-    for t, a in zip(plan.t_s, plan.angle_rad, strict=True):
+    for i, (t, a) in enumerate(zip(plan.t_s, plan.angle_rad, strict=True)):
         point = JointTrajectoryPoint()
         point.positions = [float(a)]
+        # With them the compensator joins the knots as ros2_controllers would: cubic with
+        # velocities, quintic with accelerations too; without, with straight lines.
+        if plan.velocity_rad_s is not None:
+            point.velocities = [float(plan.velocity_rad_s[i])]
+        if plan.accel_rad_s2 is not None:
+            point.accelerations = [float(plan.accel_rad_s2[i])]
         # Split the rounded whole: rounding the fraction alone turned a knot within half a
         # nanosecond below a whole second into (that second - 1, 0 ns), a second early.
         sec, nanosec = divmod(s_to_ns(t), NS_PER_S)

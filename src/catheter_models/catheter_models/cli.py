@@ -98,6 +98,17 @@ def _workers_argument(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _reference_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--reference",
+        choices=("filter_bank", "recurrent", "stronger"),
+        default="filter_bank",
+        help="the black box the error is judged against: the filter bank (seconds, default), "
+        "a recurrent network trained to convergence (minutes; needs torch), or both, the "
+        "stronger one judging (docs/lab.md)",
+    )
+
+
 def _refit_arguments(p: argparse.ArgumentParser) -> None:
     """What ``add`` and ``core`` share: the model changed, where it goes, the data, the lab."""
     p.add_argument("model", type=Path, help="grey-box or DRDPI model directory")
@@ -304,6 +315,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="skip the black-box reference (the noise floor alone judges 'adequate')",
     )
+    _reference_argument(diag)
     diag.add_argument("-o", "--output", type=Path, default=None, help="figures and JSON here")
     _workers_argument(diag)
     _accept_implausible_argument(diag)
@@ -326,6 +338,7 @@ def build_parser() -> argparse.ArgumentParser:
     expl.add_argument("--max-steps", type=int, default=4, help="changes at most (4)")
     _workers_argument(expl)
     _accept_implausible_argument(expl)
+    _reference_argument(expl)
     expl.set_defaults(func=_cmd_explain)
 
     add = sub.add_parser("add", help="add an effect block to a grey-box model and refit")

@@ -112,7 +112,7 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
         test,
         effects=args.effect or None,
         cores=args.core,
-        reference=not args.no_reference,
+        reference=False if args.no_reference else args.reference,
         workers=args.workers,
     )
     print(result.text())
@@ -227,7 +227,13 @@ def _cmd_explain(args: argparse.Namespace) -> int:
         )
 
     result = explain(
-        model, train, test, max_steps=args.max_steps, on_step=on_step, workers=args.workers
+        model,
+        train,
+        test,
+        max_steps=args.max_steps,
+        on_step=on_step,
+        workers=args.workers,
+        reference=args.reference,
     )
     print()
     print(result.text())

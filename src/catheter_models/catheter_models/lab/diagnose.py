@@ -41,7 +41,7 @@ import numpy.typing as npt
 
 from catheter_models.errors import ParameterError
 from catheter_models.lab.diagnose_plot import plot_diagnosis
-from catheter_models.lab.floors import FilterBankReference, noise_std_deg
+from catheter_models.lab.floors import FILTER_BANK, REFERENCES, noise_std_deg, reference_floor
 from catheter_models.lab.refit_pool import (
     RefitWorkerError,
     default_workers,
@@ -303,8 +303,10 @@ def _pair_cores_with_the_leading_block(
 
 
 @one_blas_thread
-def _reference_rmse_deg(train: Sequence[Recording], test: Sequence[Recording]) -> float:
-    return FilterBankReference().fit(train).rmse_deg(test)
+def _reference(
+    kind: str, train: Sequence[Recording], test: Sequence[Recording]
+) -> tuple[float, str, dict[str, float]]:
+    return reference_floor(kind, train, test)
 
 
 @one_blas_thread
@@ -315,8 +317,9 @@ def diagnose(
     *,
     effects: Sequence[str] | None = None,
     cores: Sequence[str] | None = None,
-    reference: bool = True,
+    reference: bool | str = True,
     reference_deg: float | None = None,
+    reference_name: str = FILTER_BANK,
     min_reduction: float = MIN_REDUCTION,
     progress: bool = False,
     workers: int | None = None,
@@ -330,9 +333,13 @@ def diagnose(
         test: Held-out recordings every change is scored on.
         effects: Catalogue effects to try (default: every one the chain lacks).
         cores: Cores to try instead of the chain's (default: every other one; ``[]``: none).
-        reference: Fit the black-box reference (seconds); without it, only the noise floor.
+        reference: The black-box reference to fit: one of
+            :data:`~catheter_models.lab.floors.REFERENCES` (``True``: the filter bank,
+            seconds; ``"recurrent"`` or ``"stronger"``: minutes); ``False``: none, only the
+            noise floor.
         reference_deg: The reference's held-out RMSE, already fitted on this same split
             (``explain`` passes its first step's): used as it is, not fitted again.
+        reference_name: What ``reference_deg`` is (said beside it).
         min_reduction: Least share of the held-out error a change must remove.
         progress: Show the core's search progress (refits then run in this process).
         workers: Processes for the refits, which are independent (default: one per core
@@ -352,7 +359,10 @@ def diagnose(
     if chain is not None:
         wanted, other_cores = _changes(chain, effects, cores)
     forward = model.direction == "forward"
-    fit_reference = reference and forward and reference_deg is None
+    kind = "filter_bank" if reference is True else reference or ""
+    if kind and kind not in REFERENCES:
+        raise ParameterError(f"unknown reference {kind!r}; one of {', '.join(REFERENCES)}")
+    fit_reference = kind if kind and forward and reference_deg is None else ""
     tasks = len(other_cores) + len(wanted) + (1 if fit_reference else 0)
     with (
         refit_executor(workers, progress=progress, tasks=tasks)
@@ -367,11 +377,22 @@ def diagnose(
             other_cores,
             chain=chain,
             reference=fit_reference,
-            reference_deg=reference_deg if reference else None,
+            given_reference=(
+                (reference_deg, reference_name) if kind and reference_deg is not None else None
+            ),
             min_reduction=min_reduction,
             progress=progress,
             pool=chosen,
         )
+
+
+def _floors(
+    noise_deg: float, reference: Future[tuple[float, str, dict[str, float]]] | None
+) -> Floors:
+    if reference is None:
+        return Floors(noise_deg, math.nan)
+    deg, name, fitted = reference.result()
+    return Floors(noise_deg, deg, name, fitted)
 
 
 def _diagnose(
@@ -382,8 +403,8 @@ def _diagnose(
     other_cores: list[str],
     *,
     chain: GreyBox | None,
-    reference: bool,
-    reference_deg: float | None,
+    reference: str,
+    given_reference: tuple[float, str] | None,
     min_reduction: float,
     progress: bool,
     pool: Executor,
@@ -394,12 +415,13 @@ def _diagnose(
     """
     noise = noise_std_deg(test)
     forward = model.direction == "forward"
-    reference_future: Future[float] | None = None
+    reference_future: Future[tuple[float, str, dict[str, float]]] | None = None
     if reference:
-        reference_future = pool.submit(_reference_rmse_deg, train, test)
-    elif reference_deg is not None and forward:
+        reference_future = pool.submit(_reference, reference, train, test)
+    elif given_reference is not None and forward:
         reference_future = Future()
-        reference_future.set_result(reference_deg)
+        deg, name = given_reference
+        reference_future.set_result((deg, name, {name: deg}))
     residual = _residuals(model, test)
     report = _residual_report(test, residual, model.direction)
     rmse_test = float(rad_to_deg(np.sqrt(np.mean(np.concatenate(residual) ** 2))))
@@ -407,7 +429,7 @@ def _diagnose(
     regimes_deg = regimes.table(residual) if forward else {}
     signature = _signature(residual, regimes, report, noise) if forward else []
     if chain is None:
-        floors = Floors(noise, reference_future.result() if reference_future else math.nan)
+        floors = _floors(noise, reference_future)
         return Diagnosis(
             model_kind=model.kind,
             chain=[model.kind],
@@ -443,7 +465,7 @@ def _diagnose(
             rival = BLOCKS[e].rival
             if rival and rival not in chain.effects and rival not in fits:
                 fits[rival] = pool.submit(_fit_change, chain, rival, train, progress)
-    floors = Floors(noise, reference_future.result() if reference_future else math.nan)
+    floors = _floors(noise, reference_future)
     base_train = _rmse_deg(chain, train)
 
     def scored(change: str, fitted: GreyBox) -> tuple[float, float, float, float]:

@@ -101,16 +101,25 @@ def explain(
     progress: bool = False,
     on_step: Callable[[Step], None] | None = None,
     workers: int | None = None,
+    reference: bool | str = True,
 ) -> Explanation:
     """Diagnose and make the best change until none earns its place (at most ``max_steps``).
 
     ``on_step`` is called with each step as it is made (to save the version, say).
     ``workers``: processes for each diagnosis's refits, started once for the whole loop
-    (default: one per core; 1: in this process).
+    (default: one per core; 1: in this process). ``reference``: the black box the first
+    step fits and every step is judged against (:func:`~catheter_models.lab.diagnose.diagnose`).
     """
     with refit_executor(workers, progress=progress) as pool:
         return _explain(
-            model, train, test, max_steps=max_steps, progress=progress, on_step=on_step, pool=pool
+            model,
+            train,
+            test,
+            max_steps=max_steps,
+            progress=progress,
+            on_step=on_step,
+            pool=pool,
+            reference=reference,
         )
 
 
@@ -123,9 +132,10 @@ def _explain(
     progress: bool,
     on_step: Callable[[Step], None] | None,
     pool: Executor,
+    reference: bool | str,
 ) -> Explanation:
     t0 = time.perf_counter()
-    diagnosis = diagnose(model, train, test, progress=progress, pool=pool)
+    diagnosis = diagnose(model, train, test, progress=progress, pool=pool, reference=reference)
     steps = [Step(model, None, diagnosis, time.perf_counter() - t0)]
     if on_step is not None:
         on_step(steps[-1])
@@ -144,7 +154,9 @@ def _explain(
             test,
             cores=[c for c in CORES if c not in tried_cores],
             # The reference depends on the split alone: fitted once, for the first step.
+            reference=reference,
             reference_deg=steps[0].diagnosis.floors.reference_deg,
+            reference_name=steps[0].diagnosis.floors.reference,
             progress=progress,
             pool=pool,
         )

@@ -105,6 +105,8 @@ class Floors:
     noise_deg: float
     reference_deg: float
     reference: str = "filter-bank black box"
+    references: dict[str, float] = field(default_factory=dict)
+    """Every black box fitted on this split, by name [deg] (the floor is the lowest)."""
 
     def near_noise(self, rmse_deg: float) -> bool:
         """Whether ``rmse_deg`` is within :data:`NEAR_NOISE` times the noise floor."""
@@ -117,8 +119,11 @@ class Floors:
         )
 
     def beaten_by_reference(self, rmse_deg: float) -> bool:
-        """Whether the black box is clearly better: ``rmse_deg`` above :data:`NEAR_REFERENCE`
-        times its error, so what is left is learnable from the pressure."""
+        """Whether the black box is clearly better than ``rmse_deg``.
+
+        Above :data:`NEAR_REFERENCE` times its error, what is left is learnable from the
+        pressure.
+        """
         return math.isfinite(self.reference_deg) and not self.near_reference(rmse_deg)
 
     def text(self, rmse_deg: float) -> str:
@@ -126,6 +131,11 @@ class Floors:
         parts = [f"noise floor {self.noise_deg:.3f} deg (model {rmse_deg / self.noise_deg:.1f} x)"]
         if math.isfinite(self.reference_deg):
             parts.append(f"{self.reference} {self.reference_deg:.3f} deg")
+        parts += [
+            f"{name} {deg:.3f} deg"
+            for name, deg in self.references.items()
+            if name != self.reference
+        ]
         return "; ".join(parts)
 
 
@@ -283,6 +293,7 @@ class Diagnosis:
                 "reference_deg": self.floors.reference_deg,
                 "reference": self.floors.reference,
                 "reference_does_better": self.floors.beaten_by_reference(self.rmse_test_deg),
+                "references": self.floors.references,
             },
             "regimes_deg": self.regimes_deg,
             "signature": self.signature,
