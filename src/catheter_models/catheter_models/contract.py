@@ -78,8 +78,9 @@ the limit is half that."""
 MAX_TRAJECTORY_MESSAGE_BYTES: Final = 1024 * 1024
 """The largest serialised ``trajectory`` message the compensator deserialises (1 MiB).
 
-A point of the one joint is 32 bytes in CDR with a position, 48 with a velocity too, so 1 MiB
-holds ``MAX_TRAJECTORY_POINTS`` of them; anything bigger is refused by its length, before rclpy
+A point of the one joint is 32 bytes in CDR with a position, 48 with a velocity too and 64 with
+an acceleration too (15,000 such points serialise to 960,036 bytes), so 1 MiB holds
+``MAX_TRAJECTORY_POINTS`` of them; anything bigger is refused by its length, before rclpy
 turns it into Python objects."""
 MAX_TRAJECTORY_FILE_BYTES: Final = 2 * 1024 * 1024
 """The largest trajectory file (CSV/YAML) ``follow_trajectory --file`` reads (2 MiB): about 140
