@@ -149,7 +149,7 @@ def test_a_reference_already_fitted_on_the_split_is_used_as_it_is(
     def no_fit(*_args: object) -> float:
         raise AssertionError("the reference was fitted again")
 
-    monkeypatch.setattr(diagnose_module, "_reference_rmse_deg", no_fit)
+    monkeypatch.setattr(diagnose_module, "_reference", no_fit)
     model = free_pi_on_creep
     given = diagnose(
         model,
