@@ -155,6 +155,19 @@ def test_a_recording_missing_commands_is_refused_past_its_limit() -> None:
     assert "limit 5%" in found and "held commands" in found
 
 
+def test_a_recording_whose_sensors_begin_after_the_excitation_is_refused() -> None:
+    # Once on a live run the recorder heard the laser 2.2 s into the excitation: the bag
+    # began mid-motion, and the lab fitted the chain from a wrong rest (0.51 against 0.11 deg).
+    late = ResponseCheck(
+        "train", 2.9, 2.9, 25.0, 240.0, 60000, late_sensor="tip/angle", late_by_s=2.155
+    )
+    found = late.problem()
+    assert "train: tip/angle begins 2.15 s after the excitation did" in found
+    assert "does not start at rest" in found and "run again" in found
+    assert late.to_dict()["late_sensor"] == "tip/angle"
+    assert ResponseCheck("train", 2.9, 2.9, 25.0, 240.0, 60000).problem() == ""
+
+
 def test_the_protocols_are_signals_excite_knows() -> None:
     for protocol in steps.PROTOCOLS:
         signals = steps.protocol_signals(protocol)

@@ -35,7 +35,12 @@ from catheter_control.tracking_report import RunRecord
 from catheter_control.trajectory import TrajectoryPlan
 from catheter_models.bag import load_bag
 from catheter_models.bag.space import SpaceNeed, contract_streams, need_for
-from catheter_models.contract import CONTROL_RATE_HZ, SENSOR_RATE_HZ
+from catheter_models.contract import (
+    CONTROL_RATE_HZ,
+    PRESSURE_MEASURED,
+    SENSOR_RATE_HZ,
+    TIP_ANGLE,
+)
 from catheter_models.errors import CatheterError, GraphConflictError
 from catheter_models.geometry import Calibration
 from catheter_models.lab.signals import lab_spec
@@ -47,6 +52,8 @@ RIG_MODES = ("sim", "emulated", "running")
 _EXCITE_LEAD_IN_S = 0.5
 _EXCITE_TAIL_S = 1.0
 _EXCITE_START_WAIT_S = 30.0
+_MOVING_PA = 1.0e3
+"""A command above this has left rest [Pa] (excite's lead-in sends zeros)."""
 """How long ``excite`` waits for the rig and the recorder to subscribe (discovery on a busy
 host can take seconds; a rig that never listens is named after this)."""
 _DISCOVERY_S = 2.0
@@ -360,6 +367,10 @@ class CommissionRig:
                 excite_log.open("wb") as log,
                 _DiagnosticsListener(self.choice.namespace, heard) as listener,
             ):
+                # Discovery is pairwise: the rig's sensors may reach excite and not yet the
+                # recorder. Excited before the recorder hears them, the bag began 2.7 s into
+                # the excitation, mid-motion, once, and the lab fitted from a wrong rest.
+                self._wait_until_recorder_hears(listener, heard)
                 proc = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT)
                 start = time.monotonic()
                 limit_s = duration_s + _EXCITE_START_WAIT_S + 30.0
@@ -393,6 +404,28 @@ class CommissionRig:
         if proc.returncode != 0:
             tail = "\n".join(excite_log.read_text(errors="replace").splitlines()[-5:])
             raise RigError(f"excite ended with code {proc.returncode}:\n{tail}")
+
+    def _wait_until_recorder_hears(self, listener: _DiagnosticsListener, heard: RunRecord) -> None:
+        """Until the recorder reports a publisher on each sensor stream (its /diagnostics).
+
+        Raises:
+            RigError: it hears none on one of them within the start wait.
+        """
+        ns = self.choice.namespace.rstrip("/")
+        streams = [f"{ns}/{name}" for name in (PRESSURE_MEASURED.name, TIP_ANGLE.name)]
+
+        def unheard() -> list[str]:
+            return [t for t in streams if int(heard.recorder.get(f"publishers {t}", "0")) < 1]
+
+        until = time.monotonic() + _EXCITE_START_WAIT_S
+        while unheard() and time.monotonic() < until:
+            listener.spin(0.1)
+            self._check_alive()
+        if unheard():
+            raise RigError(
+                f"the recorder hears no publisher on {', '.join(unheard())} after "
+                f"{_EXCITE_START_WAIT_S:g} s; nothing was excited"
+            )
 
     def _check_alive(self, extra: ProcessGraph | None = None) -> None:
         for graph in (self._graph, extra):
@@ -505,6 +538,10 @@ class ResponseCheck:
     samples: int
     commands_expected: int = 0
     commands_missing: int = 0
+    late_sensor: str = ""
+    """A sensor stream that begins after the excitation did ('' if none)."""
+    late_by_s: float = 0.0
+    """How long after the first command off zero it begins [s]."""
 
     @property
     def commands_missing_share(self) -> float:
@@ -513,6 +550,14 @@ class ResponseCheck:
 
     def problem(self) -> str:
         """'' for a rig that responds and a recording fit to learn from, else what is not."""
+        if self.late_sensor:
+            # The lab runs every model from rest at the bag's start: a bag that begins
+            # mid-motion teaches it a wrong rest (once, a fit of 0.51 deg against 0.11 deg).
+            return (
+                f"{self.bag}: {self.late_sensor} begins {self.late_by_s:.2f} s after the "
+                "excitation did (the recorder had not heard the rig yet), so the bag does not "
+                "start at rest; the step is to be run again (rerun the command)"
+            )
         if self.commands_missing_share > MAX_COMMANDS_LOST_SHARE:
             return (
                 f"{self.bag}: {self.commands_missing} of {self.commands_expected} commands "
@@ -551,6 +596,8 @@ class ResponseCheck:
             "samples": self.samples,
             "commands_expected": self.commands_expected,
             "commands_missing": self.commands_missing,
+            "late_sensor": self.late_sensor,
+            "late_by_s": self.late_by_s,
         }
 
 
@@ -568,6 +615,18 @@ def check_response(bag_path: Path) -> ResponseCheck:
         low, high = np.percentile(values, [5.0, 95.0])
         return float(high - low)
 
+    # When the excitation left zero, and whether every sensor was heard by then.
+    moving = np.flatnonzero(np.asarray(bag.pressure_command.values) > _MOVING_PA)
+    excited_s = float(stamps_s[moving[0]]) if moving.size else float("inf")
+    late_sensor, late_by_s = "", 0.0
+    for name, stream in (
+        ("tip/angle", bag.tip_angle),
+        ("pressure/measured", bag.pressure_measured),
+    ):
+        first_s = float(stream.t_s[0]) if stream.t_s.size else float("inf")
+        if first_s - excited_s > late_by_s:
+            late_sensor, late_by_s = name, first_s - excited_s
+
     return ResponseCheck(
         bag=bag_path.name,
         command_span_bar=span(np.asarray(series.pressure_command_pa)) / 1e5,
@@ -577,4 +636,6 @@ def check_response(bag_path: Path) -> ResponseCheck:
         samples=int(series.t_s.size),
         commands_expected=expected,
         commands_missing=max(expected - int(stamps_s.size), 0),
+        late_sensor=late_sensor,
+        late_by_s=late_by_s,
     )

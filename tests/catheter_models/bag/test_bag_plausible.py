@@ -190,6 +190,35 @@ def test_a_few_glitches_warn_and_the_data_is_used(tmp_path: Path) -> None:
     assert findings["repeated stamps"].count == 29
 
 
+def test_a_bag_whose_sensors_begin_mid_motion_is_said_so(tmp_path: Path) -> None:
+    # A live commissioning once recorded the laser from 2.2 s into the excitation (the
+    # recorder had not heard it yet): the bag began mid-motion, and the lab fitted from a
+    # wrong rest. Here the sensors lose their first second after the command left rest.
+    command = bb.read_streams()["pressure/command"]
+    left_rest_ns = int(command.stamp_ns[np.flatnonzero(command.values > 1e3)[0]])
+
+    def late(name: str, s: bb.Stream) -> bb.Stream:
+        if name == "pressure/command":
+            return s
+        keep = s.stamp_ns >= left_rest_ns + NS_PER_S
+        return bb.Stream(s.log_ns[keep], s.stamp_ns[keep], s.values[keep])
+
+    bag = bb.rewrite(tmp_path / "late", late)
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        recording_from_bag(bag)
+    findings = [
+        w.message.finding
+        for w in seen
+        if isinstance(w.message, PlausibilityWarning)
+        and w.message.finding.check == "starts after the motion"
+    ]
+    assert {f.topic for f in findings} == {"/catheter/tip/angle", "/catheter/pressure/measured"}
+    assert all(f.severity == "warn" for f in findings)
+    assert "1.00 s after pressure/command left rest" in findings[0].detail
+    assert "does not start at rest" in findings[0].detail
+
+
 @pytest.mark.parametrize("bag", SHIPPED_BAGS, ids=lambda p: p.name)
 def test_real_recordings_raise_no_finding(bag: Path) -> None:
     data = load_bag(bag)

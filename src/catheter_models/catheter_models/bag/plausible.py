@@ -30,6 +30,8 @@ The rules, check by check:
   held then is unknown. A few happen on real drivers (the laser driver stamps its first samples,
   before its time base settles, with one stamp: 9 to 45 of 7,000 in the emulated rig's bags);
   a large share is a broken time base.
+* **starts after the motion** (warn): a sensor stream (``tip/angle``, ``pressure/measured``)
+  whose first sample comes after ``pressure/command`` left rest; the bag begins mid-motion.
 * **stamps vs log time** (refuse when the stamps' span and the log times' span differ by more
   than ``STAMP_RATE_TOLERANCE`` of the log span and ``STAMP_LOG_TOLERANCE_S``: the stamps run
   on another clock rate or unit; warn when single samples were logged more than
@@ -226,7 +228,52 @@ def check_streams(
             continue
         findings += _check_values(stream, start_ns, ambient_pa)
         findings += _check_stamps(stream, start_ns)
+    findings += _check_start_at_rest(streams, start_ns)
     return PlausibilityReport(tuple(findings))
+
+
+_AT_REST_PA: Final = 1.0e3
+"""A pressure command above this has left rest [Pa gauge]."""
+_SENSORS: Final = ("tip/angle", "pressure/measured")
+
+
+def _check_start_at_rest(streams: Sequence[StreamSamples], start_ns: int) -> list[Finding]:
+    """Sensor streams that begin only after the command left rest: the bag starts mid-motion.
+
+    Every model is run from rest at a bag's start: a recorder that heard the laser 2.2 s into
+    a live excitation taught the lab a wrong rest (0.51 deg against 0.11).
+    """
+    by_name = {s.name: s for s in streams if s.values.size}
+    command = by_name.get("pressure/command")
+    if command is None:
+        return []
+    moving = np.flatnonzero(np.nan_to_num(command.values) > _AT_REST_PA)
+    if moving.size == 0:
+        return []
+    left_rest_ns = int(command.stamps_ns[moving[0]])
+    out = []
+    for name in _SENSORS:
+        stream = by_name.get(name)
+        if stream is None or int(stream.stamps_ns[0]) <= left_rest_ns:
+            continue
+        late_s = (int(stream.stamps_ns[0]) - left_rest_ns) / NS_PER_S
+        out.append(
+            Finding(
+                topic=stream.topic,
+                check="starts after the motion",
+                severity="warn",
+                count=1,
+                total=int(stream.values.size),
+                first_s=float(stream.log_ns[0] - start_ns) / NS_PER_S,
+                detail=(
+                    f"its first sample is {late_s:.2f} s after pressure/command left rest: the "
+                    "bag does not start at rest, and models run from rest at its start (the "
+                    "recorder heard the sensor late?)"
+                ),
+                unit="first samples",
+            )
+        )
+    return out
 
 
 def _first_s(stream: StreamSamples, mask: npt.NDArray[np.bool_], start_ns: int) -> float | None:
