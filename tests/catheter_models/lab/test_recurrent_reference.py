@@ -8,9 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from catheter_models.lab import floors
-from catheter_models.lab.floors import FILTER_BANK, FilterBankReference, reference_floor
+from catheter_models.lab import references
+from catheter_models.lab.floors import FilterBankReference
 from catheter_models.lab.recurrent_reference import NAME, RecurrentReference
+from catheter_models.lab.references import FILTER_BANK, reference_floor
 from catheter_models.models.base import Recording
 
 RATE_HZ = 250.0
@@ -48,8 +49,8 @@ def test_it_learns_what_the_filter_bank_cannot_and_is_chosen_as_the_stronger(
     # Each start keeps its best epoch; epoch 0 is the filter bank on the training part.
     assert all(r.best_epoch > 0 for r in reference.report_)
     assert reference.rmse_deg(test) < 0.7 * bank_deg
-    monkeypatch.setitem(floors.RECURRENT_SETTINGS, "starts", 1)
-    monkeypatch.setitem(floors.RECURRENT_SETTINGS, "max_epochs", 4)
+    monkeypatch.setitem(references.RECURRENT_SETTINGS, "starts", 1)
+    monkeypatch.setitem(references.RECURRENT_SETTINGS, "max_epochs", 4)
     deg, name, fitted = reference_floor("stronger", train, test)
     assert name == NAME and set(fitted) == {NAME, FILTER_BANK}
     assert deg == min(fitted.values()) and math.isclose(fitted[FILTER_BANK], bank_deg)

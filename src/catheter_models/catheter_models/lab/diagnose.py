@@ -41,7 +41,8 @@ import numpy.typing as npt
 
 from catheter_models.errors import ParameterError
 from catheter_models.lab.diagnose_plot import plot_diagnosis
-from catheter_models.lab.floors import FILTER_BANK, REFERENCES, noise_std_deg, reference_floor
+from catheter_models.lab.floors import noise_std_deg
+from catheter_models.lab.references import FILTER_BANK, REFERENCES, reference_floor
 from catheter_models.lab.refit_pool import (
     RefitWorkerError,
     default_workers,
