@@ -139,6 +139,17 @@ class ForeignPlant(ABC):
     supports: ClassVar[tuple[str, ...]] = (*CATALOGUE, *OUTSIDE)
     """Effects it can hide (all of :data:`RANGES` unless a plant says otherwise)."""
 
+    def effects_by_name(self, effects: Sequence[Effect]) -> dict[str, Effect]:
+        """``effects`` by name; an effect given twice, or one this plant cannot hide, is refused."""
+        by_name: dict[str, Effect] = {}
+        for effect in effects:
+            if effect.name in by_name:
+                raise ValueError(f"effect {effect.name!r} given twice")
+            if effect.name not in self.supports:
+                raise ValueError(f"{self.name} cannot hide {effect.name!r}")
+            by_name[effect.name] = effect
+        return by_name
+
     @property
     @abstractmethod
     def noise_std_rad(self) -> float:

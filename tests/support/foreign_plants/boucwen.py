@@ -511,13 +511,7 @@ class BoucWenPlant(ForeignPlant):
         """The kernel's inputs for a run at ``rate_hz`` with ``effects``."""
         if not rate_hz > 0.0 or not math.isfinite(rate_hz):
             raise ValueError(f"rate_hz must be positive, got {rate_hz}")
-        by_name: dict[str, Effect] = {}
-        for effect in effects:
-            if effect.name in by_name:
-                raise ValueError(f"effect {effect.name!r} given twice")
-            if effect.name not in self.supports:
-                raise ValueError(f"{self.name} cannot hide {effect.name!r}")
-            by_name[effect.name] = effect
+        by_name = self.effects_by_name(effects)
         substeps = max(1, math.ceil(SUBSTEP_RATE_HZ / rate_hz))
         dt = 1.0 / (rate_hz * substeps)
 

@@ -422,13 +422,7 @@ class DuhemPlant(ForeignPlant):
     def _run(self, rate_hz: float, effects: Sequence[Effect]) -> _Run:
         if not rate_hz > 0.0 or not math.isfinite(rate_hz):
             raise ValueError(f"rate_hz must be positive, got {rate_hz}")
-        by_name: dict[str, Effect] = {}
-        for effect in effects:
-            if effect.name in by_name:
-                raise ValueError(f"effect {effect.name!r} given twice")
-            if effect.name not in self.supports:
-                raise ValueError(f"{self.name} cannot hide {effect.name!r}")
-            by_name[effect.name] = effect
+        by_name = self.effects_by_name(effects)
 
         def par(name: str, key: str, default: float) -> float:
             return float(by_name[name].params[key]) if name in by_name else default
