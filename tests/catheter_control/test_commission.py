@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import pytest
@@ -11,6 +12,8 @@ from tuned_gains import sealed_gains
 from catheter_control import commission as cm
 from catheter_control import commission_steps as steps
 from catheter_control.commission_rig import ResponseCheck, RigChoice, signal_duration_s
+from catheter_control.tracking_report import RunRecord
+from catheter_control.trajectory import TrajectoryPlan
 from catheter_models.errors import CatheterError
 from catheter_models.signals import TEST_TRAJECTORIES
 
@@ -298,3 +301,63 @@ def test_tune_takes_the_loop_s_shape_from_the_explained_chain(
     shutil.copytree(SUPPORT_DIR / "foreign_plants" / "boucwen_delay_chain", explained)
     job._tune("bags/train", steps.StepRecord())
     assert ran[-1][ran[-1].index("--chain") + 1] == str(explained)
+
+
+class _RigThatStops:
+    """A rig whose first ``len(stops)`` runs stop part-way for those reasons, then go through."""
+
+    def __init__(self, stops: list[str]) -> None:
+        self.stops = stops
+        self.runs = 0
+
+    def follow(self, plan: TrajectoryPlan, *_args: object, **_kw: object) -> RunRecord:
+        run = RunRecord()
+        for t, a in zip(plan.t_s, plan.angle_rad, strict=True):
+            run.desired.append(float(t), float(a))
+            # The second run's bend is 0.1 deg off, so its score is told from the first's.
+            run.measured.append(float(t), float(a) + math.radians(0.1 * (self.runs + 1) / 2))
+        if self.runs < len(self.stops):
+            run.stopped = self.stops[self.runs]
+        self.runs += 1
+        return run
+
+
+def _follow_on(tmp_path: Path, rig: _RigThatStops) -> steps.StepRecord:
+    job = _job(tmp_path)
+    job.rig = rig  # type: ignore[assignment]
+    job._rig_up = True
+    candidate = cm.Candidate("idrdpi+pi", "idrdpi", tmp_path, "pi", tmp_path / "feedback.json")
+    record = steps.StepRecord()
+    job._follow(candidate, TEST_TRAJECTORIES[1], tmp_path / "run", record)
+    return record
+
+
+SILENCE = "tip/angle stale: no sample for 104 ms (limit 100 ms)"
+
+
+def test_a_run_stopped_by_a_moment_of_sensor_silence_is_followed_once_more(
+    tmp_path: Path,
+) -> None:
+    rig = _RigThatStops([SILENCE])
+    record = _follow_on(tmp_path, rig)
+    assert rig.runs == 2
+    assert record.facts["retried_after"] == SILENCE
+    assert record.facts["rmse_deg"] == pytest.approx(0.1, abs=1e-6)  # the second run's
+    assert not record.facts["stopped"]
+
+
+def test_a_sensor_that_stays_silent_stops_the_step(tmp_path: Path) -> None:
+    rig = _RigThatStops([SILENCE, SILENCE])
+    with pytest.raises(steps.StepError, match="stopped part-way: tip/angle stale"):
+        _follow_on(tmp_path, rig)
+    assert rig.runs == 2
+
+
+@pytest.mark.parametrize(
+    "why", ["tip/angle required but none received", "the model's output is not finite"]
+)
+def test_other_stops_are_not_retried(tmp_path: Path, why: str) -> None:
+    rig = _RigThatStops([why])
+    with pytest.raises(steps.StepError, match="stopped part-way"):
+        _follow_on(tmp_path, rig)
+    assert rig.runs == 1

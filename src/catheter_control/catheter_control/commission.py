@@ -59,6 +59,7 @@ from catheter_control.commission_steps import (
     protocol_signals,
     run_lab,
 )
+from catheter_control.control_core import is_sensor_silence
 from catheter_control.graph_domain import (
     GraphConflictError,
     default_domain_choice,
@@ -536,6 +537,24 @@ class Commission:
             control_rate_hz=self.control_rate_hz,
             show_progress=self.show_progress,
         )
+        if run.stopped and is_sensor_silence(run.stopped):
+            # A sensor that fell silent for a moment and came back (seen live: both sensors
+            # 332 ms silent at the compensator while the rig kept its deadlines) says
+            # nothing about the candidate. Once more from rest, and the report says so; a
+            # laser that froze stops the second run too, and the step with it.
+            print(
+                f"commission: {candidate.name} on {trajectory} stopped part-way: "
+                f"{run.stopped}; following it once more from rest",
+                flush=True,
+            )
+            record.facts["retried_after"] = run.stopped
+            run = self.rig.follow(
+                plan,
+                candidate,
+                lead_s,
+                control_rate_hz=self.control_rate_hz,
+                show_progress=self.show_progress,
+            )
         result = report.score_record(run, plan.duration_s, lead_s)
         print(result.text(f"{trajectory}, {candidate.name}"))
         run_dir.mkdir(parents=True, exist_ok=True)

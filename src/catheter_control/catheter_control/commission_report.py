@@ -217,6 +217,16 @@ def write_report(
                 cells.append("-" if r is None else f"<span{cls}>{r:.3f}</span>")
             rows.append(cells)
         parts.append(_table(["candidate", *job.trajectories], rows))
+        retried = [
+            (name.split(":", 2)[1:], rec.facts["retried_after"])
+            for name, rec in steps.items()
+            if name.startswith("follow:") and rec.facts.get("retried_after")
+        ]
+        for (cand, t), why in retried:
+            parts.append(
+                f"<p>{html.escape(cand)} on {html.escape(t)} was followed twice: the first run "
+                f"stopped part-way ({html.escape(str(why))}); the score is the second's.</p>"
+            )
         for cand in scores:
             for t in job.trajectories:
                 png = job.out_dir / "runs" / cand / t / "tracking.png"

@@ -322,6 +322,19 @@ class ControlCore:
         return TickOutput(command, self._last_angle if following else None, self.state)
 
 
+_SILENCE = " stale: no sample for "
+"""How :meth:`SensorWatch.stale` words a silence, so :func:`is_sensor_silence` can know it."""
+
+
+def is_sensor_silence(reason: str) -> bool:
+    """Whether a run's stop ``reason`` is a sensor that fell silent mid-run.
+
+    Not a stream that never came (``required but none received``): that is a rig not
+    publishing at all, where a second attempt would only wait as long again.
+    """
+    return _SILENCE in reason
+
+
 class SensorWatch:
     """Ages of the sensor streams a run depends on; names the first one gone stale.
 
@@ -370,8 +383,5 @@ class SensorWatch:
             if age == math.inf:
                 return f"{name} required but none received"
             if age > self.timeout_s:
-                return (
-                    f"{name} stale: no sample for {age * 1e3:.0f} ms "
-                    f"(limit {self.timeout_s * 1e3:.0f} ms)"
-                )
+                return f"{name}{_SILENCE}{age * 1e3:.0f} ms (limit {self.timeout_s * 1e3:.0f} ms)"
         return ""
