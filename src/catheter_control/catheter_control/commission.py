@@ -530,13 +530,15 @@ class Commission:
             f"--compensator {candidate.compensator} --feedback pi --feedback-gains "
             f"{candidate.feedback_gains} --feedforward-shaping {candidate.feedforward_shaping}"
         )
-        run = self.rig.follow(
+        follow_once = functools.partial(
+            self.rig.follow,
             plan,
             candidate,
             lead_s,
             control_rate_hz=self.control_rate_hz,
             show_progress=self.show_progress,
         )
+        run = follow_once()
         if run.stopped and is_sensor_silence(run.stopped):
             # A sensor that fell silent for a moment and came back (seen live: both sensors
             # 332 ms silent at the compensator while the rig kept its deadlines) says
@@ -548,13 +550,7 @@ class Commission:
                 flush=True,
             )
             record.facts["retried_after"] = run.stopped
-            run = self.rig.follow(
-                plan,
-                candidate,
-                lead_s,
-                control_rate_hz=self.control_rate_hz,
-                show_progress=self.show_progress,
-            )
+            run = follow_once()
         result = report.score_record(run, plan.duration_s, lead_s)
         print(result.text(f"{trajectory}, {candidate.name}"))
         run_dir.mkdir(parents=True, exist_ok=True)
