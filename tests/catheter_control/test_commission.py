@@ -11,7 +11,12 @@ from tuned_gains import sealed_gains
 
 from catheter_control import commission as cm
 from catheter_control import commission_steps as steps
-from catheter_control.commission_rig import ResponseCheck, RigChoice, signal_duration_s
+from catheter_control.commission_rig import (
+    Candidate,
+    ResponseCheck,
+    RigChoice,
+    signal_duration_s,
+)
 from catheter_control.tracking_report import RunRecord
 from catheter_control.trajectory import TrajectoryPlan
 from catheter_models.errors import CatheterError
@@ -361,3 +366,75 @@ def test_other_stops_are_not_retried(tmp_path: Path, why: str) -> None:
     with pytest.raises(steps.StepError, match="stopped part-way"):
         _follow_on(tmp_path, rig)
     assert rig.runs == 1
+
+
+def _scored_follows(job: cm.Commission, rmse: dict[str, list[float]]) -> list[tuple[str, str]]:
+    """The job's follow loop, each run scored from ``rmse``: the runs, in order."""
+    ran: list[tuple[str, str]] = []
+
+    def follow(
+        candidate: Candidate, trajectory: str, run_dir: Path, record: steps.StepRecord
+    ) -> None:
+        ran.append((candidate.name, trajectory))
+        run_dir.mkdir(parents=True, exist_ok=True)
+        (run_dir / "report.json").write_text("{}")
+        record.facts["rmse_deg"] = rmse[candidate.name][job.trajectories.index(trajectory)]
+
+    job._follow = follow  # type: ignore[method-assign]
+    job._follow_all()
+    return ran
+
+
+def _with_greybox(job: cm.Commission) -> None:
+    _tuned(job, resonance_hz=0.0)
+    for kind in ("greybox", "idrdpi"):
+        job.candidate_dir(kind).mkdir(parents=True)
+
+
+def test_the_explained_chain_is_followed_first(tmp_path: Path) -> None:
+    job = _job(tmp_path, clstm_budget_s=60.0)
+    _with_greybox(job)
+    assert [c.name for c in job.candidates()] == ["greybox+pi", "idrdpi+pi", "clstm+pi"]
+
+
+def test_a_candidate_that_can_no_longer_be_chosen_is_not_followed_further(
+    tmp_path: Path,
+) -> None:
+    job = _job(tmp_path)
+    _with_greybox(job)
+    # idrdpi's first run is worse than the grey box's worst: it cannot win.
+    rmse = {"greybox+pi": [0.13, 0.08, 0.15, 0.17], "idrdpi+pi": [1.0, 0.3, 1.2, 0.7]}
+    ran = _scored_follows(job, rmse)
+    assert ran == [("greybox+pi", t) for t in TEST_TRAJECTORIES] + [
+        ("idrdpi+pi", TEST_TRAJECTORIES[0])
+    ]
+    skipped = [n for n, r in job.state.steps.items() if r.facts.get("skipped")]
+    assert skipped == [f"follow:idrdpi+pi:{t}" for t in TEST_TRAJECTORIES[1:]]
+    assert "worse than greybox+pi's worst trajectory (0.170 deg)" in str(
+        job.state.steps[skipped[0]].facts["skipped"]
+    )
+    assert job._select() == 0
+    chosen = json.loads((job.out_dir / cm.MODEL_DIR / cm.COMMISSIONED_FILE).read_text())
+    assert chosen["compensator"] == "greybox"
+    # A rerun asking for every run follows only what was skipped.
+    again = _job(tmp_path)
+    again.every_run = True
+    assert _scored_follows(again, rmse) == [("idrdpi+pi", t) for t in TEST_TRAJECTORIES[1:]]
+    assert len(again.scores()["idrdpi+pi"]) == len(TEST_TRAJECTORIES)
+
+
+@pytest.mark.parametrize(
+    ("idrdpi", "runs"),
+    [
+        ([0.1, 0.1, 0.1, 0.1], 4),  # better everywhere: followed through, and chosen
+        ([0.17, 0.17, 0.17, 0.17], 4),  # ties the worst: may still win on the sum
+        ([0.1, 0.1, 0.1, 0.5], 4),  # worse only on the last: found out there
+    ],
+)
+def test_a_candidate_that_may_still_win_is_followed_on_every_trajectory(
+    tmp_path: Path, idrdpi: list[float], runs: int
+) -> None:
+    job = _job(tmp_path)
+    _with_greybox(job)
+    ran = _scored_follows(job, {"greybox+pi": [0.13, 0.08, 0.15, 0.17], "idrdpi+pi": idrdpi})
+    assert sum(1 for c, _ in ran if c == "idrdpi+pi") == runs

@@ -112,6 +112,8 @@ class Commission:
     control_rate_hz: float
     show_progress: bool
     trajectories: tuple[str, ...] = TEST_TRAJECTORIES
+    every_run: bool = False
+    """Follow every candidate on every trajectory, also those that can no longer be chosen."""
     state: State = field(init=False)
     rig: CommissionRig = field(init=False)
     _rig_up: bool = field(default=False, init=False)
@@ -161,9 +163,10 @@ class Commission:
         (``zvd``) as well: a hysteresis inverse kinks the pressure at every reversal and rings
         the tip, which the PI, held to a crossover below the mode, cannot undo.
         """
-        kinds = ["idrdpi"] + (["clstm"] if self.clstm_budget_s > 0 else [])
-        if self.candidate_dir("greybox").exists():
-            kinds.append("greybox")
+        # The explained chain first: where the lab found the catheter's physics its inverse
+        # is the likely winner, and the others are then cut short sooner (:meth:`hopeless`).
+        kinds = ["greybox"] if self.candidate_dir("greybox").exists() else []
+        kinds += ["idrdpi"] + (["clstm"] if self.clstm_budget_s > 0 else [])
         shapings = ["none"] + (["zvd"] if self.tip_mode_hz() > 0.0 else [])
         gains = self.tune_dir / "feedback.json"
         return [
@@ -258,16 +261,27 @@ class Commission:
             "run the explained chain backwards (the greybox compensator)",
             self._greybox,
         )
+        self._follow_all()
+        return self._select()
+
+    def _follow_all(self) -> None:
+        """Each candidate on each trajectory, but none that can no longer be chosen."""
         for candidate in self.candidates():
             for trajectory in self.trajectories:
                 run_dir = self.out_dir / "runs" / candidate.name / trajectory
+                name = f"follow:{candidate.name}:{trajectory}"
+                hopeless = "" if self.state.done(name) else self.hopeless(candidate.name)
+                if hopeless:
+                    print(f"commission: {candidate.name}: not followed on {trajectory}: {hopeless}")
+                    self.state.steps[name] = StepRecord(facts={"skipped": hopeless})
+                    self.state.save()
+                    continue
                 self.step(
-                    f"follow:{candidate.name}:{trajectory}",
+                    name,
                     f"follow {trajectory} with {candidate.name}",
                     functools.partial(self._follow, candidate, trajectory, run_dir),
                     run_dir / "report.json",
                 )
-        return self._select()
 
     # -- the steps ------------------------------------------------------------------------
     def _record(self, part: str, signals: list[str], record: StepRecord) -> None:
@@ -579,6 +593,33 @@ class Commission:
                     out.setdefault(candidate.name, {})[trajectory] = float(rec.facts["rmse_deg"])
         return out
 
+    def hopeless(self, name: str) -> str:
+        """Why candidate ``name`` can no longer be chosen, or '' while it can.
+
+        The choice goes to the best worst trajectory (:meth:`_select`), so a candidate with one
+        run already worse than the worst run of a candidate that completed every trajectory
+        cannot win: its remaining runs would cost minutes on the rig and change nothing.
+        ``every_run`` follows them anyway, for comparison.
+        """
+        if self.every_run:
+            return ""
+        scores = self.scores()
+        worst_of = {
+            c: max(s.values()) for c, s in scores.items() if len(s) == len(self.trajectories)
+        }
+        mine = scores.get(name, {})
+        if not worst_of or not mine:
+            return ""
+        best = min(worst_of, key=lambda c: worst_of[c])
+        trajectory, worst = max(mine.items(), key=lambda item: item[1])
+        if worst <= worst_of[best]:
+            return ""  # a tie on the worst may still win on the sum
+        return (
+            f"its {trajectory} ({worst:.3f} deg) is already worse than {best}'s worst "
+            f"trajectory ({worst_of[best]:.3f} deg), so it cannot be chosen (--every-run "
+            "follows it anyway)"
+        )
+
     def _select(self) -> int:
         scores = self.scores()
         complete = {c: s for c, s in scores.items() if len(s) == len(self.trajectories)}
@@ -683,6 +724,12 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
         default=",".join(TEST_TRAJECTORIES),
         help="comma-separated thesis trajectories to verify on",
     )
+    parser.add_argument(
+        "--every-run",
+        action="store_true",
+        help="follow every candidate on every trajectory, also one that can no longer be "
+        "chosen (by default its runs stop once one is worse than the best candidate's worst)",
+    )
     parser.add_argument("--control-rate-hz", type=float, default=CONTROL_RATE_HZ)
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
     args = parser.parse_args(argv)
@@ -718,6 +765,7 @@ def main(argv: list[str] | None = None) -> int:
             control_rate_hz=args.control_rate_hz,
             show_progress=not args.no_progress,
             trajectories=tuple(args.trajectories.split(",")),
+            every_run=args.every_run,
         )
     except (CatheterError, OSError, ValueError) as exc:
         print(f"commission: {exc}", file=sys.stderr)

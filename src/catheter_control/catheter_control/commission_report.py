@@ -147,7 +147,14 @@ def write_report(
 
     # Time per step.
     rows = [
-        [html.escape(name), f"{rec.seconds:.0f}" if rec.done else "not done"]
+        [
+            html.escape(name),
+            f"{rec.seconds:.0f}"
+            if rec.done
+            else "skipped"
+            if rec.facts.get("skipped")
+            else "not done",
+        ]
         for name, rec in steps.items()
         if name != "select"
     ]
@@ -222,6 +229,16 @@ def write_report(
             for name, rec in steps.items()
             if name.startswith("follow:") and rec.facts.get("retried_after")
         ]
+        skipped: dict[str, tuple[list[str], str]] = {}
+        for name, rec in steps.items():
+            if name.startswith("follow:") and rec.facts.get("skipped"):
+                _, cand, t = name.split(":", 2)
+                skipped.setdefault(cand, ([], str(rec.facts["skipped"])))[0].append(t)
+        for cand, (ts, why) in skipped.items():
+            parts.append(
+                f"<p>{html.escape(cand)} was not followed on {html.escape(', '.join(ts))}: "
+                f"{html.escape(why)}.</p>"
+            )
         for (cand, t), why in retried:
             parts.append(
                 f"<p>{html.escape(cand)} on {html.escape(t)} was followed twice: the first run "
