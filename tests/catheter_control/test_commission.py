@@ -438,3 +438,19 @@ def test_a_candidate_that_may_still_win_is_followed_on_every_trajectory(
     _with_greybox(job)
     ran = _scored_follows(job, {"greybox+pi": [0.13, 0.08, 0.15, 0.17], "idrdpi+pi": idrdpi})
     assert sum(1 for c, _ in ran if c == "idrdpi+pi") == runs
+
+
+def test_the_report_says_which_runs_were_skipped_or_repeated_and_why(tmp_path: Path) -> None:
+    from catheter_control.commission_report import write_report
+
+    job = _job(tmp_path)
+    _with_greybox(job)
+    _scored_follows(
+        job, {"greybox+pi": [0.13, 0.08, 0.15, 0.17], "idrdpi+pi": [1.0, 0.3, 1.2, 0.7]}
+    )
+    job.state.steps[f"follow:greybox+pi:{TEST_TRAJECTORIES[0]}"].facts["retried_after"] = SILENCE
+    page = write_report(job, "", job.out_dir / cm.MODEL_DIR, cm.TARGET_RMSE_DEG).read_text()
+    assert f"idrdpi+pi was not followed on {', '.join(TEST_TRAJECTORIES[1:])}: its" in page
+    assert f"greybox+pi on {TEST_TRAJECTORIES[0]} was followed twice" in page
+    assert SILENCE in page
+    assert page.count(">skipped<") == len(TEST_TRAJECTORIES) - 1
