@@ -454,3 +454,34 @@ def test_the_report_says_which_runs_were_skipped_or_repeated_and_why(tmp_path: P
     assert f"greybox+pi on {TEST_TRAJECTORIES[0]} was followed twice" in page
     assert SILENCE in page
     assert page.count(">skipped<") == len(TEST_TRAJECTORIES) - 1
+
+
+def test_a_miss_says_what_lies_below_the_bend_the_catheter_rests_at(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    job = _job(tmp_path)
+    _fake_runs(job, {"idrdpi": [0.32, 0.09, 0.31, 0.2]})
+    floor = {"rest_bend_deg": 0.9, "bound_rmse_deg": 0.21, "above_rmse_deg": 0.15}
+    job.state.steps[f"follow:idrdpi+pi:{TEST_TRAJECTORIES[0]}"].facts["vented_floor"] = {
+        **floor,
+        "below_share": 0.12,
+    }
+    assert job._select() == cm.EXIT_BELOW_TARGET
+    commissioned = json.loads((job.out_dir / cm.MODEL_DIR / cm.COMMISSIONED_FILE).read_text())
+    assert set(commissioned["misses"]) == {TEST_TRAJECTORIES[0], TEST_TRAJECTORIES[2]}
+    # Only the run that measured its rest says so; the other miss is a plain miss.
+    assert commissioned["misses_vented_floor"] == {
+        TEST_TRAJECTORIES[0]: {**floor, "below_share": 0.12}
+    }
+    err = capsys.readouterr().err
+    assert (
+        f"{TEST_TRAJECTORIES[0]} (0.320 deg; it rests at 0.90 deg vented, and the set-points "
+        "below that cost at least 0.210 deg that no pressure removes; 0.150 deg where the "
+        "set-point is above it)"
+    ) in err
+    assert f"{TEST_TRAJECTORIES[2]} (0.310 deg)" in err
+    from catheter_control.commission_report import write_report
+
+    page = write_report(job, "", job.out_dir / cm.MODEL_DIR, cm.TARGET_RMSE_DEG).read_text()
+    assert "the catheter rests at 0.90° with the valve vented" in page
+    assert "cost at least 0.210° RMSE that no pressure removes" in page

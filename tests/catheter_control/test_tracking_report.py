@@ -1,11 +1,15 @@
 """The tracking report scores on header stamps and refuses runs it cannot score."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from catheter_control.tracking_report import (
+    RunRecord,
     TrackingError,
     save_plot,
+    score_record,
     score_run,
     timing_summary,
     timing_text,
@@ -79,3 +83,37 @@ def test_timing_summary_without_reports_says_nothing_it_does_not_know() -> None:
     timing = timing_summary([], [])
     assert timing["ticks"] == 0 and timing["missed_fraction"] is None
     assert "n/a" in timing_text(timing)
+
+
+def _vented_run(first_deg: float, rest_deg: float = 1.0) -> RunRecord:
+    """A sine from ``first_deg`` after a 1 s lead-in, on a catheter that cannot go below rest."""
+    run = RunRecord()
+    t = np.arange(0.0, 11.0, 0.004)
+    desired = np.where(t < 1.0, first_deg, first_deg + 5.0 * (1.0 - np.cos(t - 1.0)))
+    measured = np.maximum(desired, rest_deg)
+    for ti, d, m in zip(t, np.radians(desired), np.radians(measured), strict=True):
+        run.desired.append(float(ti), float(d))
+        run.measured.append(float(ti), float(m))
+    return run
+
+
+def test_a_catheter_that_rests_bent_when_vented_is_told_apart_from_the_tracking(
+    tmp_path: Path,
+) -> None:
+    result = score_record(_vented_run(0.0), duration_s=11.0, lead_s=1.0)
+    vented = result.vented
+    assert vented is not None
+    assert np.degrees(vented.rest_bend_rad) == pytest.approx(1.0)
+    # Everything the run misses lies below the rest: the bound is the whole error.
+    assert vented.bound_rmse_rad == pytest.approx(result.overall.rmse, rel=1e-9)
+    assert vented.above_rmse_rad == pytest.approx(0.0, abs=1e-12)
+    below = np.radians(5.0) * (1 - np.cos(np.arange(0.0, 10.0, 0.004))) < np.radians(1.0)
+    assert vented.below_share == pytest.approx(below.mean(), abs=0.01)
+    assert "rests at 1.00 deg vented" in result.text("x")
+    assert result.to_json()["vented_floor"]["rest_bend_deg"] == pytest.approx(1.0)
+    assert save_plot(result, tmp_path / "p.png", "x").stat().st_size > 10_000
+
+
+def test_a_trajectory_that_does_not_start_at_rest_says_nothing_of_the_vented_bend() -> None:
+    assert score_record(_vented_run(3.0), duration_s=11.0, lead_s=1.0).vented is None
+    assert score_record(_vented_run(0.0), duration_s=11.0, lead_s=0.0).vented is None

@@ -580,6 +580,8 @@ class Commission:
             mae_deg=math.degrees(result.overall.mae),
             stopped=run.stopped,
         )
+        if result.vented is not None:
+            record.facts["vented_floor"] = result.vented.to_json()
         if run.stopped:
             raise StepError(f"{candidate.name} on {trajectory} stopped part-way: {run.stopped}")
 
@@ -634,6 +636,9 @@ class Commission:
         shutil.copytree(candidate.model_dir, model)
         shutil.copy2(candidate.feedback_gains, model / "feedback.json")
         misses = {t: r for t, r in complete[best].items() if r > TARGET_RMSE_DEG}
+        floors = {
+            t: self.state.steps[f"follow:{best}:{t}"].facts.get("vented_floor") for t in misses
+        }
         commissioned = {
             "compensator": candidate.compensator,
             "feedback": candidate.feedback,
@@ -642,6 +647,8 @@ class Commission:
             "rmse_deg": complete[best],
             "target_rmse_deg": TARGET_RMSE_DEG,
             "misses": misses,
+            # Where the catheter rests vented, for each miss: how much no pressure could reach.
+            "misses_vented_floor": {t: f for t, f in floors.items() if f},
             "candidates": scores,
         }
         (model / COMMISSIONED_FILE).write_text(json.dumps(commissioned, indent=2) + "\n")
@@ -656,11 +663,25 @@ class Commission:
         if misses:
             print(
                 f"commission: above the {TARGET_RMSE_DEG} deg target on "
-                + ", ".join(f"{t} ({r:.3f} deg)" for t, r in misses.items()),
+                + ", ".join(
+                    f"{t} ({r:.3f} deg{_below_rest(floors[t])})" for t, r in misses.items()
+                ),
                 file=sys.stderr,
             )
             return EXIT_BELOW_TARGET
         return 0
+
+
+def _below_rest(floor: dict[str, Any] | None) -> str:
+    """What of a miss lies below the bend the catheter rests at vented ('' if nothing known)."""
+    if not floor or floor["bound_rmse_deg"] < 0.005:
+        return ""
+    above = floor["above_rmse_deg"]
+    return (
+        f"; it rests at {floor['rest_bend_deg']:.2f} deg vented, and the set-points below that "
+        f"cost at least {floor['bound_rmse_deg']:.3f} deg that no pressure removes"
+        + ("" if above is None else f"; {above:.3f} deg where the set-point is above it")
+    )
 
 
 def _parse(argv: list[str] | None) -> argparse.Namespace:

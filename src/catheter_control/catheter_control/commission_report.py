@@ -144,6 +144,18 @@ def write_report(
             parts.append(
                 f"<p class='miss'>Not reached: the {target_rmse_deg}° RMSE target on {misses}.</p>"
             )
+            for t, floor in f.get("misses_vented_floor", {}).items():
+                if floor["bound_rmse_deg"] < 0.005:
+                    continue
+                above = floor["above_rmse_deg"]
+                parts.append(
+                    f"<p>{html.escape(t)}: the catheter rests at {floor['rest_bend_deg']:.2f}° "
+                    f"with the valve vented (measured in the lead-in), and "
+                    f"{100 * floor['below_share']:.0f} % of the set-points lie below that: they "
+                    f"cost at least {floor['bound_rmse_deg']:.3f}° RMSE that no pressure removes"
+                    + ("" if above is None else f"; where the set-point is above it, {above:.3f}°")
+                    + " (the dotted line in its plot).</p>"
+                )
 
     # Time per step.
     rows = [

@@ -11,6 +11,7 @@ facts written to ``report.json``.
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 import math
@@ -45,6 +46,59 @@ class TrackingError(CatheterError):
     """The run has too little data to score (e.g. no measurement during the trajectory)."""
 
 
+REST_START_RAD = math.radians(0.05)
+"""A trajectory whose lead-in holds at most this bend starts at rest: its lead-in vents."""
+
+
+@dataclass(frozen=True)
+class VentedFloor:
+    """Where the catheter rests with the valve vented, and what that costs a trajectory.
+
+    A catheter whose friction holds it bent when vented (measured: the Maxwell-slip plant keeps
+    0.85-1 deg) cannot be brought lower by any pressure: a set-point below that bend is an
+    error the controller cannot remove. A trajectory that starts at 0 deg (the thesis's do)
+    asks for rest through its lead-in, so the feedback vents the valve there and the bend then
+    measured is where the catheter rests. It is a lower estimate: after a high peak the
+    catheter may rest higher still.
+
+    Attributes:
+        rest_bend_rad: The median bend over the second half of the lead-in.
+        bound_rmse_rad: The RMSE the set-points below it cost at least, were the rest
+            tracked perfectly (the root mean square of ``max(0, rest - desired)``).
+        above_rmse_rad: The RMSE where the set-point is at or above the rest bend (None if
+            too few samples are).
+        below_share: The share of the scored samples whose set-point is below it.
+    """
+
+    rest_bend_rad: float
+    bound_rmse_rad: float
+    above_rmse_rad: float | None
+    below_share: float
+
+    def text(self) -> str:
+        """One line for the terminal report (degrees)."""
+        above = (
+            "n/a" if self.above_rmse_rad is None else f"{rad_to_deg(self.above_rmse_rad):.3f} deg"
+        )
+        return (
+            f"rests at {rad_to_deg(self.rest_bend_rad):.2f} deg vented (lead-in): "
+            f"{100 * self.below_share:.0f} % of the set-points lie below it, at least "
+            f"{rad_to_deg(self.bound_rmse_rad):.3f} deg RMSE no pressure removes; RMSE where the "
+            f"set-point is above it {above}"
+        )
+
+    def to_json(self) -> dict[str, float | None]:
+        """In degrees, for report.json."""
+        return {
+            "rest_bend_deg": rad_to_deg(self.rest_bend_rad),
+            "bound_rmse_deg": rad_to_deg(self.bound_rmse_rad),
+            "above_rmse_deg": (
+                None if self.above_rmse_rad is None else rad_to_deg(self.above_rmse_rad)
+            ),
+            "below_share": self.below_share,
+        }
+
+
 @dataclass(frozen=True)
 class TrackingResult:
     """A scored run: aligned series (SI) and metrics (rad; shown in degrees)."""
@@ -54,6 +108,8 @@ class TrackingResult:
     measured_rad: FloatArray
     overall: ErrorMetrics
     by_regime: dict[str, ErrorMetrics | None]
+    vented: VentedFloor | None = None
+    """Where the catheter rests vented, for a run that starts at rest after a lead-in."""
 
     def text(self, title: str) -> str:
         """The report a person reads in the terminal (degrees; MAE = maximum abs error)."""
@@ -74,6 +130,8 @@ class TrackingResult:
                     f"    {name:<12} RMSE {rad_to_deg(m.rmse):6.3f} deg  "
                     f"MAE {rad_to_deg(m.mae):6.3f} deg  n={m.n_samples}"
                 )
+        if self.vented is not None:
+            lines.append(f"  {self.vented.text()}")
         return "\n".join(lines)
 
     def to_json(self) -> dict[str, object]:
@@ -92,6 +150,7 @@ class TrackingResult:
         return {
             "overall": conv(self.overall),
             "by_regime": {k: conv(v) for k, v in self.by_regime.items()},
+            "vented_floor": None if self.vented is None else self.vented.to_json(),
         }
 
 
@@ -158,6 +217,14 @@ def plot_png(result: TrackingResult, title: str) -> bytes:
     ax_x = fig.add_subplot(grid[:, 2])
     ax_t.plot(result.t_s, d, label="desired", color="black", lw=1.2)
     ax_t.plot(result.t_s, m, label="measured", color="tab:red", lw=1.0)
+    if result.vented is not None:
+        ax_t.axhline(
+            rad_to_deg(result.vented.rest_bend_rad),
+            color="grey",
+            lw=0.8,
+            ls=":",
+            label="rests vented",
+        )
     ax_t.set_ylabel("bend [deg]")
     ax_t.legend(loc="upper right")
     ax_t.set_title(title)
@@ -452,12 +519,52 @@ def score_record(record: RunRecord, duration_s: float, lead_s: float) -> Trackin
     if not record.desired:
         raise TrackingError("no set-point was received; nothing to score")
     start = record.desired.t_s[0]
-    return score_run(
+    result = score_run(
         record.desired.t_s,
         record.desired.values,
         record.measured.t_s,
         record.measured.values,
         window_s=(start + lead_s, start + duration_s),
+    )
+    rest_rad = rest_bend_rad(record, lead_s)
+    if rest_rad is None:
+        return result
+    return dataclasses.replace(result, vented=vented_floor(result, rest_rad))
+
+
+def rest_bend_rad(record: RunRecord, lead_s: float) -> float | None:
+    """The bend over the second half of a lead-in that asks for rest (None if it does not).
+
+    None too when the lead-in is shorter than a few samples of the bend.
+    """
+    if lead_s <= 0.0 or not record.desired:
+        return None
+    start = record.desired.t_s[0]
+    td, yd = np.asarray(record.desired.t_s), np.asarray(record.desired.values)
+    lead = (td >= start) & (td < start + lead_s)
+    if not lead.any() or np.max(np.abs(yd[lead])) > REST_START_RAD:
+        return None
+    tm, ym = np.asarray(record.measured.t_s), np.asarray(record.measured.values)
+    rest = (tm >= start + lead_s / 2) & (tm < start + lead_s) & np.isfinite(ym)
+    if np.count_nonzero(rest) < 5:
+        return None
+    return float(np.median(ym[rest]))
+
+
+def vented_floor(result: TrackingResult, rest_bend_rad: float) -> VentedFloor:
+    """What set-points below ``rest_bend_rad`` cost the scored run (:class:`VentedFloor`)."""
+    rest = max(rest_bend_rad, 0.0)
+    below = result.desired_rad < rest
+    shortfall = np.where(below, rest - result.desired_rad, 0.0)
+    above = ~below
+    err = result.measured_rad - result.desired_rad
+    return VentedFloor(
+        rest_bend_rad=rest_bend_rad,
+        bound_rmse_rad=float(np.sqrt(np.mean(shortfall**2))),
+        above_rmse_rad=(
+            float(np.sqrt(np.mean(err[above] ** 2))) if np.count_nonzero(above) >= 10 else None
+        ),
+        below_share=float(np.mean(below)),
     )
 
 
