@@ -85,11 +85,16 @@ def test_timing_summary_without_reports_says_nothing_it_does_not_know() -> None:
     assert "n/a" in timing_text(timing)
 
 
-def _vented_run(first_deg: float, rest_deg: float = 1.0) -> RunRecord:
-    """A sine from ``first_deg`` after a 1 s lead-in, on a catheter that cannot go below rest."""
+def _vented_run(first_deg: float, rest_deg: float = 1.0, heard_before_s: float = 1.0) -> RunRecord:
+    """A sine from ``first_deg`` on a catheter that cannot go below ``rest_deg``.
+
+    The bend is heard from ``heard_before_s`` before the first set-point.
+    """
     run = RunRecord()
-    t = np.arange(0.0, 11.0, 0.004)
-    desired = np.where(t < 1.0, first_deg, first_deg + 5.0 * (1.0 - np.cos(t - 1.0)))
+    for ti in np.arange(-heard_before_s, 0.0, 0.004):
+        run.measured.append(float(ti), np.radians(max(first_deg, rest_deg)))
+    t = np.arange(0.0, 10.0, 0.004)
+    desired = first_deg + 5.0 * (1.0 - np.cos(t))
     measured = np.maximum(desired, rest_deg)
     for ti, d, m in zip(t, np.radians(desired), np.radians(measured), strict=True):
         run.desired.append(float(ti), float(d))
@@ -100,7 +105,7 @@ def _vented_run(first_deg: float, rest_deg: float = 1.0) -> RunRecord:
 def test_a_catheter_that_rests_bent_when_vented_is_told_apart_from_the_tracking(
     tmp_path: Path,
 ) -> None:
-    result = score_record(_vented_run(0.0), duration_s=11.0, lead_s=1.0)
+    result = score_record(_vented_run(0.0), duration_s=10.0, lead_s=0.0)
     vented = result.vented
     assert vented is not None
     assert np.degrees(vented.rest_bend_rad) == pytest.approx(1.0)
@@ -114,6 +119,7 @@ def test_a_catheter_that_rests_bent_when_vented_is_told_apart_from_the_tracking(
     assert save_plot(result, tmp_path / "p.png", "x").stat().st_size > 10_000
 
 
-def test_a_trajectory_that_does_not_start_at_rest_says_nothing_of_the_vented_bend() -> None:
-    assert score_record(_vented_run(3.0), duration_s=11.0, lead_s=1.0).vented is None
-    assert score_record(_vented_run(0.0), duration_s=11.0, lead_s=0.0).vented is None
+def test_a_run_that_does_not_start_from_rest_says_nothing_of_the_vented_bend() -> None:
+    assert score_record(_vented_run(3.0), duration_s=10.0, lead_s=0.0).vented is None
+    # Nothing heard before the run: where it rested is not known.
+    assert score_record(_vented_run(0.0, heard_before_s=0.0), 10.0, 0.0).vented is None

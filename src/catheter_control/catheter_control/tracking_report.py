@@ -47,7 +47,10 @@ class TrackingError(CatheterError):
 
 
 REST_START_RAD = math.radians(0.05)
-"""A trajectory whose lead-in holds at most this bend starts at rest: its lead-in vents."""
+"""A run whose first set-point is at most this bend starts from rest, with the valve vented."""
+
+REST_WINDOW_S = 0.5
+"""How long before a run from rest its bend is taken as where the catheter rests [s]."""
 
 
 @dataclass(frozen=True)
@@ -56,13 +59,13 @@ class VentedFloor:
 
     A catheter whose friction holds it bent when vented (measured: the Maxwell-slip plant keeps
     0.85-1 deg) cannot be brought lower by any pressure: a set-point below that bend is an
-    error the controller cannot remove. A trajectory that starts at 0 deg (the thesis's do)
-    asks for rest through its lead-in, so the feedback vents the valve there and the bend then
-    measured is where the catheter rests. It is a lower estimate: after a high peak the
+    error the controller cannot remove. A run whose first set-point is at rest (the thesis's
+    trajectories, or their lead-in) starts from rest with the valve vented, so the bend just
+    before it is where the catheter rests. It is a lower estimate: after a high peak the
     catheter may rest higher still.
 
     Attributes:
-        rest_bend_rad: The median bend over the second half of the lead-in.
+        rest_bend_rad: The median bend over the half second before the first set-point.
         bound_rmse_rad: The RMSE the set-points below it cost at least, were the rest
             tracked perfectly (the root mean square of ``max(0, rest - desired)``).
         above_rmse_rad: The RMSE where the set-point is at or above the rest bend (None if
@@ -81,7 +84,7 @@ class VentedFloor:
             "n/a" if self.above_rmse_rad is None else f"{rad_to_deg(self.above_rmse_rad):.3f} deg"
         )
         return (
-            f"rests at {rad_to_deg(self.rest_bend_rad):.2f} deg vented (lead-in): "
+            f"rests at {rad_to_deg(self.rest_bend_rad):.2f} deg vented (before the run): "
             f"{100 * self.below_share:.0f} % of the set-points lie below it, at least "
             f"{rad_to_deg(self.bound_rmse_rad):.3f} deg RMSE no pressure removes; RMSE where the "
             f"set-point is above it {above}"
@@ -109,7 +112,7 @@ class TrackingResult:
     overall: ErrorMetrics
     by_regime: dict[str, ErrorMetrics | None]
     vented: VentedFloor | None = None
-    """Where the catheter rests vented, for a run that starts at rest after a lead-in."""
+    """Where the catheter rests vented, for a run that starts from rest."""
 
     def text(self, title: str) -> str:
         """The report a person reads in the terminal (degrees; MAE = maximum abs error)."""
@@ -526,26 +529,24 @@ def score_record(record: RunRecord, duration_s: float, lead_s: float) -> Trackin
         record.measured.values,
         window_s=(start + lead_s, start + duration_s),
     )
-    rest_rad = rest_bend_rad(record, lead_s)
+    rest_rad = rest_bend_rad(record)
     if rest_rad is None:
         return result
     return dataclasses.replace(result, vented=vented_floor(result, rest_rad))
 
 
-def rest_bend_rad(record: RunRecord, lead_s: float) -> float | None:
-    """The bend over the second half of a lead-in that asks for rest (None if it does not).
+def rest_bend_rad(record: RunRecord) -> float | None:
+    """The bend the catheter rests at, vented, before a run that starts from rest.
 
-    None too when the lead-in is shorter than a few samples of the bend.
+    Measured over the :data:`REST_WINDOW_S` before the first set-point, when that set-point is
+    at rest: the compensator starts such a run from rest, with the valve vented. None when the
+    run starts elsewhere, or too few samples of the bend came before it.
     """
-    if lead_s <= 0.0 or not record.desired:
+    if not record.desired or abs(record.desired.values[0]) > REST_START_RAD:
         return None
     start = record.desired.t_s[0]
-    td, yd = np.asarray(record.desired.t_s), np.asarray(record.desired.values)
-    lead = (td >= start) & (td < start + lead_s)
-    if not lead.any() or np.max(np.abs(yd[lead])) > REST_START_RAD:
-        return None
     tm, ym = np.asarray(record.measured.t_s), np.asarray(record.measured.values)
-    rest = (tm >= start + lead_s / 2) & (tm < start + lead_s) & np.isfinite(ym)
+    rest = (tm >= start - REST_WINDOW_S) & (tm < start) & np.isfinite(ym)
     if np.count_nonzero(rest) < 5:
         return None
     return float(np.median(ym[rest]))
