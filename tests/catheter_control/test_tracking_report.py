@@ -123,3 +123,10 @@ def test_a_run_that_does_not_start_from_rest_says_nothing_of_the_vented_bend() -
     assert score_record(_vented_run(3.0), duration_s=10.0, lead_s=0.0).vented is None
     # Nothing heard before the run: where it rested is not known.
     assert score_record(_vented_run(0.0, heard_before_s=0.0), 10.0, 0.0).vented is None
+
+
+def test_a_catheter_that_rests_straight_is_not_told_of_a_floor() -> None:
+    result = score_record(_vented_run(0.0, rest_deg=0.0), duration_s=10.0, lead_s=0.0)
+    assert result.vented is not None and not result.vented.matters
+    assert "vented" not in result.text("x")
+    assert result.to_json()["vented_floor"]["bound_rmse_deg"] == 0.0

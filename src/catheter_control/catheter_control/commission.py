@@ -674,7 +674,10 @@ class Commission:
 
 def _below_rest(floor: dict[str, Any] | None) -> str:
     """What of a miss lies below the bend the catheter rests at vented ('' if nothing known)."""
-    if not floor or floor["bound_rmse_deg"] < 0.005:
+    # Here, not at the top: the report module brings matplotlib, which `--help` need not load.
+    from catheter_control.tracking_report import FLOOR_WORTH_SAYING_RAD
+
+    if not floor or math.radians(floor["bound_rmse_deg"]) < FLOOR_WORTH_SAYING_RAD:
         return ""
     above = floor["above_rmse_deg"]
     return (

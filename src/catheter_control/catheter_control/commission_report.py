@@ -8,12 +8,14 @@ numbers, and the exact commands that would redo each step by hand.
 from __future__ import annotations
 
 import html
+import math
 import os
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Protocol
 
 from catheter_control.commission_rig import RigChoice
+from catheter_control.tracking_report import FLOOR_WORTH_SAYING_RAD
 
 
 class _Step(Protocol):
@@ -145,7 +147,7 @@ def write_report(
                 f"<p class='miss'>Not reached: the {target_rmse_deg}° RMSE target on {misses}.</p>"
             )
             for t, floor in f.get("misses_vented_floor", {}).items():
-                if floor["bound_rmse_deg"] < 0.005:
+                if math.radians(floor["bound_rmse_deg"]) < FLOOR_WORTH_SAYING_RAD:
                     continue
                 above = floor["above_rmse_deg"]
                 parts.append(

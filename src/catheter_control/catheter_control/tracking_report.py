@@ -49,6 +49,10 @@ class TrackingError(CatheterError):
 REST_START_RAD = math.radians(0.05)
 """A run whose first set-point is at most this bend starts from rest, with the valve vented."""
 
+FLOOR_WORTH_SAYING_RAD = math.radians(0.005)
+"""Below this, what the vented rest costs a run is not said on the terminal (a catheter
+resting straight, within its noise)."""
+
 REST_WINDOW_S = 0.5
 """How long before a run from rest its bend is taken as where the catheter rests [s]."""
 
@@ -77,6 +81,11 @@ class VentedFloor:
     bound_rmse_rad: float
     above_rmse_rad: float | None
     below_share: float
+
+    @property
+    def matters(self) -> bool:
+        """Whether the set-points below the rest cost the run anything worth saying."""
+        return self.bound_rmse_rad >= FLOOR_WORTH_SAYING_RAD
 
     def text(self) -> str:
         """One line for the terminal report (degrees)."""
@@ -133,7 +142,7 @@ class TrackingResult:
                     f"    {name:<12} RMSE {rad_to_deg(m.rmse):6.3f} deg  "
                     f"MAE {rad_to_deg(m.mae):6.3f} deg  n={m.n_samples}"
                 )
-        if self.vented is not None:
+        if self.vented is not None and self.vented.matters:
             lines.append(f"  {self.vented.text()}")
         return "\n".join(lines)
 
