@@ -14,6 +14,7 @@ from catheter_control.models import load_compensator, resolve_compensator
 from catheter_models.errors import ParameterError
 from catheter_models.models.blocks import FORMS
 from catheter_models.models.cores import make_core
+from catheter_models.models.cores.base import CoreInverse
 from catheter_models.models.data import simulate_recordings
 from catheter_models.models.drdpi import DRDPI
 from catheter_models.models.greybox import GreyBox
@@ -189,3 +190,24 @@ def test_a_strong_rate_term_is_run_backwards_with_a_slower_filter_not_run_away(
     monkeypatch.setattr(core_base, "MOST_RATE_LOOP_GAIN", math.inf)
     as_fitted = invertibility_deg(strong, RATE_HZ, 0.0, 3.0)
     assert slowed < 0.5 * as_fitted, (slowed, as_fitted)
+
+
+def test_a_bend_out_of_reach_gets_the_nearer_bound_not_a_dip_of_the_fit() -> None:
+    # A fitted law that dips at the vented end (0.8 deg at 0.5 bar, 1.0 deg vented), as a
+    # free-weight PI may: a plan below every bend it gives vents the valve, since a muscle
+    # never bends less for more pressure; the dip's 0.5 bar held the catheter above its rest.
+    def bend_deg(x_bar: float) -> float:
+        return 1.0 - 0.4 * x_bar if x_bar < 0.5 else 0.8 + 10.0 * (x_bar - 0.5) ** 2
+
+    def advance(x_bar: float, state: np.ndarray) -> float:
+        return bend_deg(x_bar)
+
+    inverse = CoreInverse(np.zeros(1), advance, 0.0, 3.0)
+    inverse.take(1.0)
+    assert inverse.want(0.0) == 0.0
+    inverse.take(1.0)
+    assert inverse.want(100.0) == 3.0
+    inverse.take(1.0)
+    reachable = inverse.want(5.0)
+    assert bend_deg(reachable) == pytest.approx(5.0, abs=CoreInverse.TOLERANCE_DEG)
+    assert reachable > 0.5  # the crossing nearest the last pressure, on the rising branch

@@ -191,8 +191,15 @@ class CoreInverse:
     rises (from the same state), so the pressure is bracketed from the last one outwards and
     found by the Illinois method (regula falsi that halves a stale end: it converges
     superlinearly and never leaves the bracket). A bend the law cannot reach within
-    ``[low_bar, high_bar]`` gets the nearer bound; where a rate term makes the law not
-    monotone within a sample, the search still returns a pressure inside the bracket.
+    ``[low_bar, high_bar]`` gets the nearer bound: below every bend the law gives, the
+    lowest pressure; above, the highest. Not the pressure that came closest: where a fitted
+    law is flat or dips (a free-weight PI near the vented end), that pressure is an artefact
+    of the fit, and a muscle never bends less for more pressure. On a foreign catheter that
+    rests 0.8 deg bent, the closest pressure held the valve at 0.58 bar through every
+    valley of the plan, where the catheter sat 0.2 deg above its vented rest (the
+    ``maxwell_slip_delay`` plant of tests/support: the descending sine 0.305 -> 0.263 deg
+    with the PI, offline). Where a rate term makes the law not monotone within a sample,
+    the search still returns a pressure inside the bracket.
 
     The analytic inverses (the thesis's inverse PI, eqs. 9.2-9.11) invert a
     rate-independent law, or a rate-dependent one on the bend's rate instead of the
@@ -215,7 +222,6 @@ class CoreInverse:
         self._scratch = state.copy()
         self.low_bar, self.high_bar = float(low_bar), float(high_bar)
         self._last = float(low_bar)
-        self._closest = (float(low_bar), math.inf)
         self.evaluations = 0
         """Evaluations of the law by the last :meth:`want` (what a tick costs)."""
 
@@ -234,18 +240,16 @@ class CoreInverse:
             return x
         # The way the bend must go first; then the other way, for a fitted law that is not
         # monotone (a free-weight PI can bend more at a lower pressure): the crossing
-        # nearest the last pressure wins, else the pressure that came closest.
+        # nearest the last pressure wins.
         first = 1.0 if fx < 0.0 else -1.0
-        best_x, best_f = x, fx
         for direction in (first, -first):
             found = self._bracket(x, fx, direction, target_deg)
             if isinstance(found, float):
                 return found
             if found is not None:
                 return self._illinois(*found, target_deg)
-            if abs(self._closest[1]) < abs(best_f):
-                best_x, best_f = self._closest
-        return best_x
+        # No crossing from here to either bound: every bend seen lies on the side of fx.
+        return lo if fx > 0.0 else hi
 
     def _bracket(
         self, x: float, fx: float, direction: float, target_deg: float
@@ -253,12 +257,11 @@ class CoreInverse:
         """From ``x`` in ``direction``, in steps growing fourfold, to a sign change.
 
         A float: a pressure within tolerance; a tuple: the bracket (a, fa, b, fb); None: a
-        bound reached without a crossing (the closest point seen is kept in ``_closest``).
+        bound reached without a crossing.
         """
         lo, hi = self.low_bar, self.high_bar
         step = 0.02
         a, fa = x, fx
-        self._closest = (x, fx)
         while True:
             b = min(a + step, hi) if direction > 0.0 else max(a - step, lo)
             if b == a:
@@ -266,8 +269,6 @@ class CoreInverse:
             fb = self._bend(b) - target_deg
             if abs(fb) <= self.TOLERANCE_DEG:
                 return b
-            if abs(fb) < abs(self._closest[1]):
-                self._closest = (b, fb)
             if (fb > 0.0) != (fa > 0.0):
                 return (a, fa, b, fb)
             a, fa, step = b, fb, step * 4.0
