@@ -675,16 +675,10 @@ class Commission:
 def _below_rest(floor: dict[str, Any] | None) -> str:
     """What of a miss lies below the bend the catheter rests at vented ('' if nothing known)."""
     # Here, not at the top: the report module brings matplotlib, which `--help` need not load.
-    from catheter_control.tracking_report import FLOOR_WORTH_SAYING_RAD
+    from catheter_control.tracking_report import VentedFloor
 
-    if not floor or math.radians(floor["bound_rmse_deg"]) < FLOOR_WORTH_SAYING_RAD:
-        return ""
-    above = floor["above_rmse_deg"]
-    return (
-        f"; it rests at {floor['rest_bend_deg']:.2f} deg vented, and the set-points below that "
-        f"cost at least {floor['bound_rmse_deg']:.3f} deg that no pressure removes"
-        + ("" if above is None else f"; {above:.3f} deg where the set-point is above it")
-    )
+    vented = VentedFloor.from_json(floor) if floor else None
+    return f"; it {vented.text()}" if vented is not None and vented.matters else ""
 
 
 def _parse(argv: list[str] | None) -> argparse.Namespace:

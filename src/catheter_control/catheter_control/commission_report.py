@@ -8,14 +8,13 @@ numbers, and the exact commands that would redo each step by hand.
 from __future__ import annotations
 
 import html
-import math
 import os
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Protocol
 
 from catheter_control.commission_rig import RigChoice
-from catheter_control.tracking_report import FLOOR_WORTH_SAYING_RAD
+from catheter_control.tracking_report import VentedFloor
 
 
 class _Step(Protocol):
@@ -147,17 +146,12 @@ def write_report(
                 f"<p class='miss'>Not reached: the {target_rmse_deg}° RMSE target on {misses}.</p>"
             )
             for t, floor in f.get("misses_vented_floor", {}).items():
-                if math.radians(floor["bound_rmse_deg"]) < FLOOR_WORTH_SAYING_RAD:
-                    continue
-                above = floor["above_rmse_deg"]
-                parts.append(
-                    f"<p>{html.escape(t)}: the catheter rests at {floor['rest_bend_deg']:.2f}° "
-                    f"with the valve vented (measured in the lead-in), and "
-                    f"{100 * floor['below_share']:.0f} % of the set-points lie below that: they "
-                    f"cost at least {floor['bound_rmse_deg']:.3f}° RMSE that no pressure removes"
-                    + ("" if above is None else f"; where the set-point is above it, {above:.3f}°")
-                    + " (the dotted line in its plot).</p>"
-                )
+                vented = VentedFloor.from_json(floor)
+                if vented.matters:
+                    parts.append(
+                        f"<p>{html.escape(t)}: the catheter {html.escape(vented.text())} (the "
+                        "dotted line in its plot).</p>"
+                    )
 
     # Time per step.
     rows = [

@@ -99,6 +99,17 @@ class VentedFloor:
             f"set-point is above it {above}"
         )
 
+    @classmethod
+    def from_json(cls, d: dict[str, Any]) -> VentedFloor:
+        """Back from :meth:`to_json` (a run's ``vented_floor`` in report.json or commission)."""
+        above = d.get("above_rmse_deg")
+        return cls(
+            rest_bend_rad=math.radians(d["rest_bend_deg"]),
+            bound_rmse_rad=math.radians(d["bound_rmse_deg"]),
+            above_rmse_rad=None if above is None else math.radians(above),
+            below_share=float(d["below_share"]),
+        )
+
     def to_json(self) -> dict[str, float | None]:
         """In degrees, for report.json."""
         return {
