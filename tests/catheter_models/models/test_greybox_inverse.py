@@ -211,3 +211,23 @@ def test_a_bend_out_of_reach_gets_the_nearer_bound_not_a_dip_of_the_fit() -> Non
     reachable = inverse.want(5.0)
     assert bend_deg(reachable) == pytest.approx(5.0, abs=CoreInverse.TOLERANCE_DEG)
     assert reachable > 0.5  # the crossing nearest the last pressure, on the rising branch
+    # Told to keep the muscle charged, it stays near where the law bends least (the dip's
+    # bottom, to the search's coarse steps on its way down), not vented.
+    inverse.bound_out_of_reach = False
+    inverse.take(1.0)
+    charged = inverse.want(0.0)
+    assert 0.4 < charged < 0.7 and bend_deg(charged) < bend_deg(0.0)
+
+
+@pytest.mark.parametrize(
+    ("effects", "vents"),
+    [([], True), (["transport_delay"], True), (["tip_dynamics"], True), (["pneumatic_lag"], False)],
+)
+def test_only_a_chain_that_refills_through_a_lag_keeps_the_muscle_charged_out_of_reach(
+    cores, effects: list[str], vents: bool
+) -> None:
+    # Behind a lag, venting where the plan is out of reach costs the refill when it rises.
+    inverse = GreyBoxInverse(chain(cores, "gpi", effects))
+    assert inverse._core.bound_out_of_reach is vents
+    inverse.reset()
+    assert inverse._core.bound_out_of_reach is vents

@@ -202,6 +202,11 @@ class Inverse:
     """How far ahead of the bend this stage reads the plan [s] (a delay's delay; a stage that
     needs the plan's next samples, their time)."""
 
+    fills: bool = False
+    """Whether the pressure behind this stage takes time to come back once vented (a lag):
+    the core's inverse then keeps the muscle charged where the plan is out of reach
+    (:class:`~catheter_models.models.cores.base.CoreInverse`)."""
+
     def want(self, target: float) -> float:
         """The input that makes this stage's next output ``target``."""
         return target
@@ -219,6 +224,8 @@ class LagMixInverse(Inverse):
     ``x = (y - share * sum a s) / ((1 - fraction) + share * sum (1 - a))``. A mix of lags
     has no zeros outside the unit circle (its inverse is a stable lead): nothing rings.
     """
+
+    fills = True
 
     def __init__(self, rate_hz: float, time_constants_s: Sequence[float], fraction: float) -> None:
         self._poles = [math.exp(-1.0 / (rate_hz * tau)) for tau in time_constants_s]

@@ -159,6 +159,8 @@ class _LagInverse(Inverse):
     asks for what is still missing.
     """
 
+    fills = True
+
     def __init__(self, dt_s: float, fill_s: float, vent_s: float, max_step: float) -> None:
         self._a_fill = 1.0 - math.exp(-dt_s / fill_s)
         self._a_vent = 1.0 - math.exp(-dt_s / vent_s)

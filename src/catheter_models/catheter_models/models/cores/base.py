@@ -191,15 +191,21 @@ class CoreInverse:
     rises (from the same state), so the pressure is bracketed from the last one outwards and
     found by the Illinois method (regula falsi that halves a stale end: it converges
     superlinearly and never leaves the bracket). A bend the law cannot reach within
-    ``[low_bar, high_bar]`` gets the nearer bound: below every bend the law gives, the
-    lowest pressure; above, the highest. Not the pressure that came closest: where a fitted
-    law is flat or dips (a free-weight PI near the vented end), that pressure is an artefact
-    of the fit, and a muscle never bends less for more pressure. On a foreign catheter that
-    rests 0.8 deg bent, the closest pressure held the valve at 0.58 bar through every
-    valley of the plan, where the catheter sat 0.2 deg above its vented rest (the
-    ``maxwell_slip_delay`` plant of tests/support: the descending sine 0.305 -> 0.263 deg
-    with the PI, offline). Where a rate term makes the law not monotone within a sample,
-    the search still returns a pressure inside the bracket.
+    ``[low_bar, high_bar]`` gets the nearer bound (below every bend the law gives, the
+    lowest pressure; above, the highest), unless :attr:`bound_out_of_reach` is off; then it
+    gets the pressure whose bend came closest. Where a fit is flat at the vented end, the
+    two differ: the closest pressure is the top of the flat stretch, where the muscle is
+    charged for the next rise at no cost to the bend, as the model sees it. On a catheter
+    whose unloading goes on below where the fit flattens, that held it 0.2 deg above its
+    vented rest through every valley of a plan below the rest (the ``maxwell_slip_delay``
+    plant of tests/support: 0.58 bar, where it rests at 0.97 deg, vented at 0.81): there
+    the bound is right, since a muscle never bends less for less pressure. Behind a
+    pneumatic lag the charge is worth keeping: venting it costs the refill through the
+    lag when the plan rises again (a held-out Maxwell-slip case with a lag: 0.33 -> 0.72 deg
+    on the up chirp vented), so the grey box's inverse turns the bound off where its chain
+    fills through a lag (:attr:`~catheter_models.models.blocks.base.Inverse.fills`).
+    Where a rate term makes the law not monotone within a sample, the search still returns
+    a pressure inside the bracket.
 
     The analytic inverses (the thesis's inverse PI, eqs. 9.2-9.11) invert a
     rate-independent law, or a rate-dependent one on the bend's rate instead of the
@@ -222,6 +228,9 @@ class CoreInverse:
         self._scratch = state.copy()
         self.low_bar, self.high_bar = float(low_bar), float(high_bar)
         self._last = float(low_bar)
+        self._closest = (float(low_bar), math.inf)
+        self.bound_out_of_reach = True
+        """A bend out of the law's reach gets the nearer bound (else the closest pressure)."""
         self.evaluations = 0
         """Evaluations of the law by the last :meth:`want` (what a tick costs)."""
 
@@ -242,14 +251,19 @@ class CoreInverse:
         # monotone (a free-weight PI can bend more at a lower pressure): the crossing
         # nearest the last pressure wins.
         first = 1.0 if fx < 0.0 else -1.0
+        best_x, best_f = x, fx
         for direction in (first, -first):
             found = self._bracket(x, fx, direction, target_deg)
             if isinstance(found, float):
                 return found
             if found is not None:
                 return self._illinois(*found, target_deg)
+            if abs(self._closest[1]) < abs(best_f):
+                best_x, best_f = self._closest
         # No crossing from here to either bound: every bend seen lies on the side of fx.
-        return lo if fx > 0.0 else hi
+        if self.bound_out_of_reach:
+            return lo if fx > 0.0 else hi
+        return best_x
 
     def _bracket(
         self, x: float, fx: float, direction: float, target_deg: float
@@ -257,11 +271,12 @@ class CoreInverse:
         """From ``x`` in ``direction``, in steps growing fourfold, to a sign change.
 
         A float: a pressure within tolerance; a tuple: the bracket (a, fa, b, fb); None: a
-        bound reached without a crossing.
+        bound reached without a crossing (the closest point seen is kept in ``_closest``).
         """
         lo, hi = self.low_bar, self.high_bar
         step = 0.02
         a, fa = x, fx
+        self._closest = (x, fx)
         while True:
             b = min(a + step, hi) if direction > 0.0 else max(a - step, lo)
             if b == a:
@@ -269,6 +284,8 @@ class CoreInverse:
             fb = self._bend(b) - target_deg
             if abs(fb) <= self.TOLERANCE_DEG:
                 return b
+            if abs(fb) < abs(self._closest[1]):
+                self._closest = (b, fb)
             if (fb > 0.0) != (fa > 0.0):
                 return (a, fa, b, fb)
             a, fa, step = b, fb, step * 4.0
