@@ -96,7 +96,10 @@ def lab_chain(case: Case, plant: str, hidden: tuple[str, ...], explain_here: boo
         from catheter_models.lab.explain import explain
         from catheter_models.models.drdpi import DRDPI
 
-        result = explain(DRDPI().fit([case.train], progress=False), [case.train], [case.test])
+        # One process: the cases already run in a pool, whose workers cannot start their own.
+        result = explain(
+            DRDPI().fit([case.train], progress=False), [case.train], [case.test], workers=1
+        )
         model = result.steps[-1].model
         assert isinstance(model, GreyBox)
         return model
