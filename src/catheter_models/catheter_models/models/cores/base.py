@@ -201,9 +201,10 @@ class CoreInverse:
     plant of tests/support: 0.58 bar, where it rests at 0.97 deg, vented at 0.81): there
     the bound is right, since a muscle never bends less for less pressure. Behind a
     pneumatic lag the charge is worth keeping: venting it costs the refill through the
-    lag when the plan rises again (a held-out Maxwell-slip case with a lag: 0.33 -> 0.72 deg
-    on the up chirp vented), so the grey box's inverse turns the bound off where its chain
-    fills through a lag (:attr:`~catheter_models.models.blocks.base.Inverse.fills`).
+    lag when the plan rises again (the greybox bench's Maxwell-slip case with a lag, seed 1:
+    0.32 -> 0.72 deg on the up chirp vented), so the grey box's inverse turns the bound off
+    where its chain fills through a lag
+    (:attr:`~catheter_models.models.blocks.base.Inverse.fills`).
     Where a rate term makes the law not monotone within a sample, the search still returns
     a pressure inside the bracket.
 
