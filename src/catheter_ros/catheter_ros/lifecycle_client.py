@@ -208,13 +208,19 @@ class LifecycleManager(Node):
             # The answer may have come from a twin discovered only now.
             if bring_up:
                 self._refuse_late_twin(name, label)
-            reason = self._reason(executor, name).removeprefix(f"{label} failed: ")
+            reason = self._reason(executor, name, label).removeprefix(f"{label} failed: ")
             raise LifecycleError(f"{name}: {label} failed: {reason}")
         self.get_logger().info(f"{name}: {label}d")
 
-    def _reason(self, executor: Executor, name: str) -> str:
+    def _reason(self, executor: Executor, name: str, label: str) -> str:
         key = name.lstrip("/")
-        self._spin(executor, lambda: key in self._status, REASON_WAIT_S)
+        # The node's periodic status ("not configured: ...") may arrive before the one that
+        # says why the transition failed: wait for that one, else take what came.
+        self._spin(
+            executor,
+            lambda: key in self._status and self._status[key][1].startswith(f"{label} failed"),
+            REASON_WAIT_S,
+        )
         if key not in self._status:
             return self.is_gone(name) or "no reason on /diagnostics; see the node's log"
         return self._status[key][1]
