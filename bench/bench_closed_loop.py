@@ -85,25 +85,25 @@ STRESS_EFFECTS = ("pneumatic_lag", "transport_delay", "tip_dynamics")
 Stepper = Callable[[float], float]
 
 
-def run_trajectory(
-    new_plant: Callable[[], Stepper], ff: Any, gains: FeedbackGains | None, trajectory: str
-) -> dict[str, Any]:
-    """One trajectory from rest, with the lead-in of :func:`track`; metrics in degrees."""
-    desired = np.asarray(get_preset(trajectory).generate(RATE_HZ).values_si)
-    before = lead_in(float(desired[0]), RATE_HZ, 1.0, 1.0)
-    plan = np.concatenate([before, desired])
-    # The compensator reads the plan this far ahead (ClosedLoop takes it as a sample).
-    preview = round(float(getattr(ff, "preview_s", 0.0)) * RATE_HZ)
+def follow_plan(
+    ff: Any, gains: FeedbackGains | None, plant: Stepper, plan: np.ndarray, rate_hz: float
+) -> tuple[np.ndarray, np.ndarray, str]:
+    """The plan through :class:`ClosedLoop` with the node's clamp and slew limit, one sample a tick.
+
+    The compensator reads the plan ``ff.preview_s`` ahead (the node's preview). Returns the
+    measured bend [rad] and the command [Pa] per sample, and the loop's fault reason ("" if
+    it was not ramped down).
+    """
+    preview = round(float(getattr(ff, "preview_s", 0.0)) * rate_hz)
     loop = ClosedLoop(
         ff,
         gains,
-        rate_hz=RATE_HZ,
+        rate_hz=rate_hz,
         min_pressure_pa=0.0,
         max_pressure_pa=DEFAULT_MAX_PRESSURE_PA,
         max_slew_pa_per_s=DEFAULT_MAX_SLEW_PA_PER_S,
     )
     loop.reset()
-    plant = new_plant()
     n = plan.size
     measured = np.zeros(n)
     command = np.zeros(n)
@@ -113,6 +113,17 @@ def run_trajectory(
         y = plant(u)
         measured[k] = y
         command[k] = u
+    return measured, command, loop.fault_reason
+
+
+def run_trajectory(
+    new_plant: Callable[[], Stepper], ff: Any, gains: FeedbackGains | None, trajectory: str
+) -> dict[str, Any]:
+    """One trajectory from rest, with the lead-in of :func:`track`; metrics in degrees."""
+    desired = np.asarray(get_preset(trajectory).generate(RATE_HZ).values_si)
+    before = lead_in(float(desired[0]), RATE_HZ, 1.0, 1.0)
+    plan = np.concatenate([before, desired])
+    measured, command, fault = follow_plan(ff, gains, new_plant(), plan, RATE_HZ)
     err = measured[before.size :] - desired
     reach = desired >= REACHABLE_RAD
     return {
@@ -122,7 +133,7 @@ def run_trajectory(
         "rmse_reachable_deg": math.degrees(float(np.sqrt(np.mean(err[reach] ** 2)))),
         "saturated_share": float(np.mean(command[before.size :] >= DEFAULT_MAX_PRESSURE_PA - 1.0)),
         # A run the feedback's authority bound cut short (ramped down) says so here.
-        "fault": loop.fault_reason,
+        "fault": fault,
         "_series": (desired, measured[before.size :]),
     }
 

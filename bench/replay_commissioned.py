@@ -29,7 +29,6 @@ is above the rest, in degrees.
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 
@@ -38,17 +37,25 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "tests" / "support"))  # foreign_plants.plugin:<name>
 
+from bench_closed_loop import follow_plan  # noqa: E402
+
 from catheter_control.models import gains_file, load_compensator, resolve_compensator  # noqa: E402
-from catheter_models.contract import MAX_PRESSURE_PA, MAX_SLEW_PA_PER_S  # noqa: E402
-from catheter_models.feedback import ClosedLoop, FeedbackGains  # noqa: E402
+from catheter_models.contract import MAX_PRESSURE_PA  # noqa: E402
+from catheter_models.feedback import FeedbackGains  # noqa: E402
 from catheter_models.models.evaluate import lead_in  # noqa: E402
 from catheter_models.plant.interface import load_plant  # noqa: E402
 from catheter_models.signals import TEST_TRAJECTORIES, get_preset  # noqa: E402
+from catheter_models.units import rad_to_deg  # noqa: E402
 
 BENT_PA = 2.2e5
 """How far the plant is bent before each run, then vented: it has been, live [Pa]."""
 REST_S = 0.5
 """How long the plant rests vented before the plan, and the window its rest is taken in [s]."""
+
+
+def rms_deg(error_rad: np.ndarray) -> float:
+    """Root mean square of an error [rad], in degrees (0 for no samples)."""
+    return float(rad_to_deg(np.sqrt(np.mean(error_rad**2)))) if error_rad.size else 0.0
 
 
 def replay(model_dir: Path, plant_spec: str, trajectory: str, feedback: bool) -> dict[str, float]:
@@ -61,38 +68,22 @@ def replay(model_dir: Path, plant_spec: str, trajectory: str, feedback: bool) ->
     desired = np.asarray(get_preset(trajectory).generate(rate_hz).values_si)
     rest = np.zeros(round(REST_S * rate_hz))
     plan = np.concatenate([rest, lead_in(float(desired[0]), rate_hz, 1.0, 1.0), desired])
-    ahead = round(ff.preview_s * rate_hz)
-    loop = ClosedLoop(
-        ff,
-        gains,
-        rate_hz=rate_hz,
-        min_pressure_pa=0.0,
-        max_pressure_pa=MAX_PRESSURE_PA,
-        max_slew_pa_per_s=MAX_SLEW_PA_PER_S,
-    )
-    loop.reset()
     plant.reset()
     ramp = np.linspace(0.0, BENT_PA, round(2.0 * rate_hz))
     for pressure_pa in np.concatenate([ramp, ramp[::-1], np.zeros(round(2.0 * rate_hz))]):
         plant.step(float(pressure_pa))
-    measured = np.zeros(plan.size)
-    bend_rad = 0.0
-    for k in range(plan.size):
-        command_pa = loop.step(float(plan[k]), bend_rad, float(plan[min(k + ahead, plan.size - 1)]))
-        _, bend_rad = plant.step(command_pa)
-        measured[k] = bend_rad
-    if loop.fault_reason:
-        print(f"  {trajectory}: ramped down: {loop.fault_reason}")
+    measured, _, fault = follow_plan(
+        ff, gains, lambda command_pa: plant.step(command_pa)[1], plan, rate_hz
+    )
+    if fault:
+        print(f"  {trajectory}: ramped down: {fault}")
     error = measured[plan.size - desired.size :] - desired
     rest_rad = float(np.median(measured[: rest.size]))
-    above = desired >= rest_rad
     return {
-        "rmse_deg": math.degrees(float(np.sqrt(np.mean(error**2)))),
-        "floor_deg": math.degrees(
-            float(np.sqrt(np.mean(np.maximum(rest_rad - desired, 0.0) ** 2)))
-        ),
-        "above_rest_deg": math.degrees(float(np.sqrt(np.mean(error[above] ** 2)))),
-        "rest_deg": math.degrees(rest_rad),
+        "rmse_deg": rms_deg(error),
+        "floor_deg": rms_deg(np.maximum(rest_rad - desired, 0.0)),
+        "above_rest_deg": rms_deg(error[desired >= rest_rad]),
+        "rest_deg": float(rad_to_deg(rest_rad)),
     }
 
 
