@@ -37,7 +37,7 @@ from catheter_models.metrics import (
     compute_metrics,
     metrics_by_regime,
 )
-from catheter_models.units import rad_to_deg
+from catheter_models.units import deg_to_rad, rad_to_deg
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -104,9 +104,9 @@ class VentedFloor:
         """Back from :meth:`to_json` (a run's ``vented_floor`` in report.json or commission)."""
         above = d.get("above_rmse_deg")
         return cls(
-            rest_bend_rad=math.radians(d["rest_bend_deg"]),
-            bound_rmse_rad=math.radians(d["bound_rmse_deg"]),
-            above_rmse_rad=None if above is None else math.radians(above),
+            rest_bend_rad=float(deg_to_rad(d["rest_bend_deg"])),
+            bound_rmse_rad=float(deg_to_rad(d["bound_rmse_deg"])),
+            above_rmse_rad=None if above is None else float(deg_to_rad(above)),
             below_share=float(d["below_share"]),
         )
 

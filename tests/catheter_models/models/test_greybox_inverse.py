@@ -213,9 +213,9 @@ def test_a_bend_out_of_reach_gets_the_nearer_bound_not_a_dip_of_the_fit() -> Non
     assert reachable > 0.5  # the crossing nearest the last pressure, on the rising branch
     # Told to keep the muscle charged, it stays near where the law bends least (the dip's
     # bottom, to the search's coarse steps on its way down), not vented.
-    inverse.bound_out_of_reach = False
-    inverse.take(1.0)
-    charged = inverse.want(0.0)
+    charging = CoreInverse(np.zeros(1), advance, 0.0, 3.0, bound_out_of_reach=False)
+    charging.take(1.0)
+    charged = charging.want(0.0)
     assert 0.4 < charged < 0.7 and bend_deg(charged) < bend_deg(0.0)
 
 

@@ -168,9 +168,13 @@ class GreyBoxInverse:
         self._inputs, self._outputs = m.inverse_stages()
         self._low_bar = float(pa_to_bar(self.min_pressure_pa))
         self._high_bar = float(pa_to_bar(self.max_pressure_pa))
-        self._core: CoreInverse = m.core_.inverse(rate, self._low_bar, self._high_bar)
         # Behind a lag the muscle refills slowly: keep it charged where the plan is out of reach.
-        self._core.bound_out_of_reach = not any(s.fills for s in self._inputs)
+        self._core: CoreInverse = m.core_.inverse(
+            rate,
+            self._low_bar,
+            self._high_bar,
+            bound_out_of_reach=not any(s.fills for s in self._inputs),
+        )
         self.model_bend_rad = 0.0
         """The bend the model expects after the last command, on the plan's clock [rad]."""
 

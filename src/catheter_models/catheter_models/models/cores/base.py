@@ -119,15 +119,20 @@ class Core(ABC):
         state, advance = self.stepper(rate_hz)
         return lambda x: advance(x, state)
 
-    def inverse(self, rate_hz: float, low_bar: float, high_bar: float) -> CoreInverse:
-        """The law run backwards, one sample a tick: the pressure for the bend wanted."""
+    def inverse(
+        self, rate_hz: float, low_bar: float, high_bar: float, *, bound_out_of_reach: bool = True
+    ) -> CoreInverse:
+        """The law run backwards, one sample a tick: the pressure for the bend wanted.
+
+        ``bound_out_of_reach``: see :class:`CoreInverse`.
+        """
         gain_s, alpha = self.rate_term(rate_hz)
         loop_gain = gain_s * alpha * rate_hz
         slower = None
         if loop_gain > MOST_RATE_LOOP_GAIN:
             slower = MOST_RATE_LOOP_GAIN / (gain_s * rate_hz)
         state, advance = self.stepper(rate_hz, lagged_rate=True, rate_alpha=slower)
-        return CoreInverse(state, advance, low_bar, high_bar)
+        return CoreInverse(state, advance, low_bar, high_bar, bound_out_of_reach=bound_out_of_reach)
 
     @abstractmethod
     def values(self) -> dict[str, Any]:
@@ -192,7 +197,7 @@ class CoreInverse:
     found by the Illinois method (regula falsi that halves a stale end: it converges
     superlinearly and never leaves the bracket). A bend the law cannot reach within
     ``[low_bar, high_bar]`` gets the nearer bound (below every bend the law gives, the
-    lowest pressure; above, the highest), unless :attr:`bound_out_of_reach` is off; then it
+    lowest pressure; above, the highest), unless ``bound_out_of_reach`` is off; then it
     gets the pressure whose bend came closest. Where a fit is flat at the vented end, the
     two differ: the closest pressure is the top of the flat stretch, where the muscle is
     charged for the next rise at no cost to the bend, as the model sees it. On a catheter
@@ -221,7 +226,13 @@ class CoreInverse:
     MAX_EVALUATIONS = 60
 
     def __init__(
-        self, state: FloatArray, advance: StateStep, low_bar: float, high_bar: float
+        self,
+        state: FloatArray,
+        advance: StateStep,
+        low_bar: float,
+        high_bar: float,
+        *,
+        bound_out_of_reach: bool = True,
     ) -> None:
         if not (math.isfinite(low_bar) and math.isfinite(high_bar) and low_bar < high_bar):
             raise ParameterError(f"a core's inverse needs low < high, got [{low_bar}, {high_bar}]")
@@ -230,7 +241,7 @@ class CoreInverse:
         self.low_bar, self.high_bar = float(low_bar), float(high_bar)
         self._last = float(low_bar)
         self._closest = (float(low_bar), math.inf)
-        self.bound_out_of_reach = True
+        self.bound_out_of_reach = bound_out_of_reach
         """A bend out of the law's reach gets the nearer bound (else the closest pressure)."""
         self.evaluations = 0
         """Evaluations of the law by the last :meth:`want` (what a tick costs)."""
