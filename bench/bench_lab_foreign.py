@@ -33,6 +33,7 @@ with blocks only, no core change and no floors).
     .venv/bin/python bench/bench_lab_foreign.py --seeds 1002 --jobs 1   # user-speed columns
     .venv/bin/python bench/bench_lab_foreign.py --quick          # 4 cases, a smoke run
     .venv/bin/python bench/bench_lab_foreign.py --merge A.json B.json   # one table of runs
+    .venv/bin/python bench/bench_lab_foreign.py --seeds 1010 1011 --ray auto  # on a cluster
 
 Speed (issue 13: one ``diagnose`` within 60 s, the whole loop within 5 minutes) is scored
 per case from each step's wall time. With ``--jobs 1`` a case runs alone and its refits
@@ -50,6 +51,7 @@ import multiprocessing
 import sys
 import time
 from collections.abc import Sequence
+from concurrent.futures import as_completed
 from pathlib import Path
 from typing import Any, Final
 
@@ -65,6 +67,7 @@ from foreign_plants.cases import HELD_OUT_SEED0, draw_case, draw_twin_case  # no
 
 from catheter_models.lab.diagnose import default_workers  # noqa: E402
 from catheter_models.lab.explain import explain  # noqa: E402
+from catheter_models.lab.refit_pool import RayExecutor  # noqa: E402
 from catheter_models.models.drdpi import DRDPI  # noqa: E402
 from catheter_models.models.evaluate import pooled_rmse  # noqa: E402
 
@@ -367,6 +370,14 @@ def main(argv: list[str] | None = None) -> int:
         "--hidden", nargs="+", default=None, help="only cases hiding one of these effects"
     )
     parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument(
+        "--ray",
+        metavar="ADDRESS",
+        default=None,
+        help="run the cases as Ray tasks on this cluster ('auto', ray://HOST:PORT, or 'local' "
+        "for a Ray started here) instead of --jobs local processes; each case's refits run "
+        "in its task; the same rows either way",
+    )
     parser.add_argument("--quick", action="store_true")
     parser.add_argument(
         "--recurrent-on",
@@ -439,7 +450,20 @@ def main(argv: list[str] | None = None) -> int:
         )
         save(partial=len(rows) < len(jobs))
 
-    if args.jobs == 1:
+    if args.ray:
+        # Where one machine is not enough: every case a Ray task, as many at once as the
+        # cluster has cores; a case's refits run inside its task (one process), as --jobs 2.
+        with RayExecutor(args.ray, modules=[REPO / "tests" / "support" / "foreign_plants"]) as ex:
+            futures = [
+                ex.submit(run_case, (*job, 1, twins, _reference_for(job[1], args.recurrent_on)))
+                for job in jobs
+            ]
+            for future in as_completed(futures):
+                done(future.result())
+        # In the grid's order, as the local runs write them (they finish in any order).
+        position = {(p, kind, tuple(h), seed): i for i, (p, kind, h, seed) in enumerate(jobs)}
+        rows.sort(key=lambda r: position[(r["plant"], r["type"], tuple(r["hidden"]), r["seed"])])
+    elif args.jobs == 1:
         # One case at a time, its refits spread over the cores: what a user's diagnose does,
         # so the speed columns are the user's (a pool's workers cannot start processes).
         for job in jobs:

@@ -16,6 +16,9 @@ setup(
         ("share/" + PACKAGE, ["package.xml"]),
     ],
     install_requires=["setuptools"],
+    # The lab's refits on a Ray cluster (`catheter-lab explain --ray ADDRESS`); never needed
+    # by the graph. The version is the one requirements-dev.txt locks and the tests run.
+    extras_require={"ray": ["ray==2.60.0"]},
     zip_safe=False,
     maintainer="catheter maintainers",
     maintainer_email="maintainers@users.noreply.example",

@@ -96,6 +96,14 @@ def _workers_argument(parser: argparse.ArgumentParser) -> None:
         help="processes for the refits, which are independent (default: one per core; "
         "1: this process only)",
     )
+    parser.add_argument(
+        "--ray",
+        metavar="ADDRESS",
+        default=None,
+        help="run the refits on a Ray cluster instead: 'auto' (the cluster this machine "
+        "belongs to), ray://HOST:PORT, or 'local' (a Ray started for this run); the same "
+        "answers; Ray is an optional extra: pip install 'catheter_models[ray]'",
+    )
 
 
 def _reference_argument(parser: argparse.ArgumentParser) -> None:

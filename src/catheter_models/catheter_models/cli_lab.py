@@ -114,6 +114,7 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
         cores=args.core,
         reference=False if args.no_reference else args.reference,
         workers=args.workers,
+        ray=args.ray,
     )
     print(result.text())
     if args.output is not None:
@@ -234,6 +235,7 @@ def _cmd_explain(args: argparse.Namespace) -> int:
         on_step=on_step,
         workers=args.workers,
         reference=args.reference,
+        ray=args.ray,
     )
     print()
     print(result.text())

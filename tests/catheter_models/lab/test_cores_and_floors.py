@@ -480,6 +480,26 @@ def test_refits_in_worker_processes_give_the_diagnosis_of_one_process(creep_case
 
 
 @pytest.mark.slow
+def test_refits_on_a_local_ray_give_the_diagnosis_of_local_processes(creep_case) -> None:
+    # Where one machine is not enough the refits go to a Ray cluster; a Ray started here
+    # is the same code path (Ray tasks, their results through futures) with no cluster.
+    pytest.importorskip("ray", reason="Ray is an optional extra (requirements-dev.txt has it)")
+    model = GreyBox().fit([creep_case.train], progress=False)
+    args = (model, [creep_case.train], [creep_case.test])
+    kwargs = {"effects": ["creep", "transport_delay"], "cores": [], "reference": False}
+    local = diagnose(*args, **kwargs, workers=2)
+    on_ray = diagnose(*args, **kwargs, ray="local")
+    assert [c.effect for c in on_ray.candidates] == [c.effect for c in local.candidates]
+    for a, b in zip(local.candidates, on_ray.candidates, strict=True):
+        assert b.rmse_test_deg == pytest.approx(a.rmse_test_deg, rel=1e-9)
+        assert b.value_si == pytest.approx(a.value_si, rel=1e-9, nan_ok=True)
+    assert on_ray.verdict == local.verdict
+    import ray
+
+    assert not ray.is_initialized()  # the Ray it started is shut down with the diagnosis
+
+
+@pytest.mark.slow
 def test_on_a_foreign_plant_the_core_is_named_as_the_largest_miss() -> None:
     case = draw_case(PLANTS["boucwen"], [], 7)
     drdpi = GreyBox().fit([case.train], progress=False)

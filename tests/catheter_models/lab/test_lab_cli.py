@@ -1,5 +1,6 @@
 """catheter-lab diagnose / add: what a person gets, and one-line refusals."""
 
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -58,6 +59,18 @@ def test_a_worker_count_below_one_is_refused_by_name(command: str, capsys) -> No
     assert run([*argv, "-o", "unused"] if command == "explain" else argv) == 2
     err = capsys.readouterr().err
     assert "argument --workers: --workers must be a whole number >= 1, not '0'" in err
+
+
+@pytest.mark.parametrize("command", ["diagnose", "explain"])
+def test_ray_without_ray_installed_is_refused_naming_the_extra(
+    command: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys
+) -> None:
+    monkeypatch.setitem(sys.modules, "ray", None)  # what `import ray` meets where it is absent
+    argv = [command, str(CLSTM), "--train", str(BAG), "--test", str(BAG), "--ray", "auto"]
+    assert run([*argv, "-o", str(tmp_path / "out")] if command == "explain" else argv) == 2
+    err = capsys.readouterr().err
+    assert "--ray auto: Ray is not installed" in err
+    assert "pip install 'catheter_models[ray]'" in err
 
 
 def _write_with_rosbags(path: Path, rate_hz: float = 250.0) -> None:

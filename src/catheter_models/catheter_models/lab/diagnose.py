@@ -325,6 +325,7 @@ def diagnose(
     progress: bool = False,
     workers: int | None = None,
     pool: Executor | None = None,
+    ray: str | None = None,
 ) -> Diagnosis:
     """Floors and residual tests on ``test``; for a grey box, a refit and score per change.
 
@@ -347,6 +348,9 @@ def diagnose(
             this process may use; 1: in this process). Results do not depend on it.
         pool: An executor to run the refits in, kept across calls (``explain`` passes one so
             that its steps do not each start processes); overrides ``workers``.
+        ray: A Ray cluster's address (``auto``, ``ray://host:port``, or ``local`` for a
+            Ray started here) to run the refits on instead of local processes; the same
+            answers (:class:`~catheter_models.lab.refit_pool.RayExecutor`).
 
     Raises:
         ParameterError: An unknown effect or core, or no training / held-out data.
@@ -366,7 +370,7 @@ def diagnose(
     fit_reference = kind if kind and forward and reference_deg is None else ""
     tasks = len(other_cores) + len(wanted) + (1 if fit_reference else 0)
     with (
-        refit_executor(workers, progress=progress, tasks=tasks)
+        refit_executor(workers, progress=progress, tasks=tasks, ray=ray)
         if pool is None or progress
         else nullcontext(pool)
     ) as chosen:

@@ -102,6 +102,7 @@ def explain(
     on_step: Callable[[Step], None] | None = None,
     workers: int | None = None,
     reference: bool | str = True,
+    ray: str | None = None,
 ) -> Explanation:
     """Diagnose and make the best change until none earns its place (at most ``max_steps``).
 
@@ -109,8 +110,10 @@ def explain(
     ``workers``: processes for each diagnosis's refits, started once for the whole loop
     (default: one per core; 1: in this process). ``reference``: the black box the first
     step fits and every step is judged against (:func:`~catheter_models.lab.diagnose.diagnose`).
+    ``ray``: a Ray cluster's address to run the refits on instead (``local``: a Ray started
+    here), the same answers (:class:`~catheter_models.lab.refit_pool.RayExecutor`).
     """
-    with refit_executor(workers, progress=progress) as pool:
+    with refit_executor(workers, progress=progress, ray=ray) as pool:
         return _explain(
             model,
             train,
