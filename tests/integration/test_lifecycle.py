@@ -10,7 +10,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
-from graph_utils import Children, Probe, diagnostic_values, gauge_pa, statuses, trajectory_msg
+from graph_utils import (
+    SLACK_SENSOR_TIMEOUT_S,
+    Children,
+    Probe,
+    diagnostic_values,
+    gauge_pa,
+    statuses,
+    trajectory_msg,
+)
 from sensor_msgs.msg import JointState
 
 from catheter_control.bringup import sim_graph_specs
@@ -79,7 +87,7 @@ def test_deactivating_the_compensator_mid_run_ramps_the_pressure_down(
 
     # This test is about the deactivation, not the sensor timeout: beside two busy loops the
     # node's 0.1 s default saw pressure/measured quiet for 104 ms and ended the run first.
-    children.graph(sim_graph_specs(compensator_params={"sensor_timeout_s": 0.5}))
+    children.graph(sim_graph_specs(compensator_params={"sensor_timeout_s": SLACK_SENSOR_TIMEOUT_S}))
     with Probe(children.domain_id) as probe:
         commands = probe.subscribe(FluidPressure, PRESSURE_COMMAND.name, qos.RECORD)
         pub = probe.node.create_publisher(JointTrajectory, TRAJECTORY.name, qos.TRAJECTORY)

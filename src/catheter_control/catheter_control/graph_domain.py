@@ -33,9 +33,10 @@ DISCOVERY_WAIT_S = 2.0
 DDS participant announces itself at once and the others answer it; the node names follow on
 ``ros_discovery_info``, participant by participant. On an idle host that takes a few hundred
 ms; on our busy 2-core test machine 1.5 s saw one node of a running graph and not the other,
-so a look that short could miss a whole graph. 2 s is commission's window for the same look
-(commission_rig._DISCOVERY_S), and every start pays it once. A graph started after the look is
-not seen; it makes its own look."""
+so a look that short could miss a whole graph. Every start pays it once. Commission's look at
+a running rig (``commission_rig._LOOK_S``) lasts longer, since there a node missed is a
+compensator the excitations fight. A graph started after the look is not seen; it makes its
+own look."""
 
 AUTO_DOMAIN_RANGE = (1, 99)
 """Where ``--domain-id auto`` looks for a domain: not 0 (every ROS tool's and rig's default),
