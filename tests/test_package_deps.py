@@ -7,7 +7,9 @@ Every module of a package (``src/<pkg>/<pkg>/**/*.py`` and its launch files) is 
 * another package of this workspace needs an ``<exec_depend>`` on it;
 * a third-party root needs the rosdep key that :data:`ROSDEP_KEYS` maps it to;
 * a root with no usable rosdep key is in :data:`PIP_ONLY`, with the reason, and
-  docker/Dockerfile must pip-install it.
+  docker/Dockerfile must pip-install it;
+* an optional extra's root (:data:`EXTRAS`) is named in its package's ``extras_require``,
+  locked for the tests, and kept out of the runtime lock and the image.
 
 An import root in none of these fails the test: a new dependency cannot slip in unnoticed.
 Imports under ``if TYPE_CHECKING:`` are skipped (they never run). The other direction is
@@ -110,6 +112,13 @@ PIP_ONLY: dict[str, tuple[str, str]] = {
 pip-installs them, pinned by docker/constraints.txt (checked below), and the venv has them
 from the lock."""
 
+EXTRAS: dict[str, tuple[str, str, str]] = {
+    "ray": ("catheter_models", "ray", "the lab's refits on a cluster (`--ray`); never the graph"),
+}
+"""Import root -> (package, extra, what for): an optional extra, imported inside the function
+that needs it (which refuses by name without it). Not in package.xml, the image or the runtime
+lock; in ``requirements-lock.txt`` so its tests run (checked below)."""
+
 
 @dataclass(frozen=True)
 class Import:
@@ -181,6 +190,8 @@ def test_every_import_has_an_exec_depend(pkg: str) -> None:
     problems = []
     for imp in package_imports(pkg):
         if not _third_party(imp, pkg) or imp.root in PIP_ONLY:
+            continue
+        if imp.root in EXTRAS and EXTRAS[imp.root][0] == pkg:
             continue
         if imp.root in PACKAGES:
             needed = imp.root
@@ -321,3 +332,31 @@ def test_the_scanner_sees_function_level_imports_and_skips_type_checking() -> No
     )
     roots = [imp.root for imp in imports_in(source, REPO / "x.py")]
     assert roots == ["__future__", "typing", "numpy", "os", "yaml", "sklearn"]
+
+
+@pytest.mark.parametrize("root", sorted(EXTRAS))
+def test_an_optional_extra_is_declared_locked_for_tests_and_kept_out_of_the_runtime(
+    root: str,
+) -> None:
+    pkg, extra, _ = EXTRAS[root]
+    setup_py = (REPO / "src" / pkg / "setup.py").read_text()
+    assert re.search(rf'extras_require=\{{[^}}]*"{extra}": \["{root}==', setup_py), (
+        f"src/{pkg}/setup.py must offer {root} as the extra {extra!r}, pinned"
+    )
+    pin = re.search(rf'"{root}==([^"]+)"', setup_py)
+    assert pin is not None
+    assert f"{root}=={pin.group(1)} " in (REPO / "requirements-lock.txt").read_text(), (
+        f"requirements-lock.txt must hold {root}=={pin.group(1)} so its tests run"
+    )
+    for runtime in (REPO / "requirements-runtime-lock.txt", CONSTRAINTS):
+        assert f"\n{root}==" not in runtime.read_text(), f"{runtime.name} must not hold {root}"
+    lazy = [
+        imp
+        for imp in package_imports(pkg)
+        if imp.root == root and imp.statement == f"import {root}"
+    ]
+    assert lazy, f"{pkg} no longer imports {root}: drop it from EXTRAS and its setup.py extra"
+    # Imported inside a function only: importing the package never needs the extra.
+    for imp in lazy:
+        line = imp.path.read_text().splitlines()[imp.line - 1]
+        assert line.startswith(" "), f"{imp.where()}: import {root} at module level"
