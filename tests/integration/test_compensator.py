@@ -20,6 +20,7 @@ from graph_utils import (
     MAX_PRESSURE_PA,
     NOISE_MARGIN_PA,
     SIM,
+    SLACK_SENSOR_TIMEOUT_S,
     Children,
     Probe,
     Stamped,
@@ -180,8 +181,9 @@ def test_tip_angle_stopping_ramps_the_pressure_down_and_says_why(
     children: Children, fault: FaultRecord
 ) -> None:
     # Not the node's 0.1 s default: beside two busy loops the relay process went quiet for
-    # 104 ms before the laser was stopped on purpose, and the run under test ended early.
-    timeout_s = 0.3
+    # 104 ms before the laser was stopped on purpose, and the run under test ended early (and
+    # for 304 ms, against 0.3 s, in a clean-clone CI run beside the lab's benchmark grid).
+    timeout_s = SLACK_SENSOR_TIMEOUT_S
     _start_rig_and_compensator(
         children, {"require_tip_angle": True, "sensor_timeout_s": timeout_s}, relay_angle=True
     )
