@@ -52,10 +52,10 @@ RIG_MODES = ("sim", "emulated", "running")
 _EXCITE_LEAD_IN_S = 0.5
 _EXCITE_TAIL_S = 1.0
 _EXCITE_START_WAIT_S = 30.0
-_MOVING_PA = 1.0e3
-"""A command above this has left rest [Pa] (excite's lead-in sends zeros)."""
 """How long ``excite`` waits for the rig and the recorder to subscribe (discovery on a busy
 host can take seconds; a rig that never listens is named after this)."""
+_MOVING_PA = 1.0e3
+"""A command above this has left rest [Pa] (excite's lead-in sends zeros)."""
 _UNKNOWN = "_UNKNOWN_"
 """What rclpy names a publisher's node and namespace before their names are discovered."""
 _LOOK_S = 10.0

@@ -73,7 +73,7 @@ class _Serial(Executor):
 RAY_LOCAL: Final = "local"
 """``--ray local``: start a Ray on this machine for the run (tests, trying it out)."""
 
-RAY_INSTALL: Final = "pip install 'catheter_models[ray]' (Ray 2.60, about 80 MB)"
+RAY_INSTALL: Final = "pip install 'catheter_models[ray]' (Ray 2.60: 240 MB installed)"
 
 
 class RayExecutor(Executor):
@@ -116,7 +116,8 @@ class RayExecutor(Executor):
             options["object_store_memory"] = 256 * 1024 * 1024
             roots = [str(Path(m).resolve().parent) for m in modules]
             if roots:
-                path = os.pathsep.join([*roots, os.environ.get("PYTHONPATH", "")]).rstrip(":")
+                path = os.pathsep.join([*roots, os.environ.get("PYTHONPATH", "")])
+                path = path.rstrip(os.pathsep)
                 options["runtime_env"] = {"env_vars": {"PYTHONPATH": path}}
         else:
             options["address"] = address
