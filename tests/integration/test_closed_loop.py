@@ -16,6 +16,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from fault_log import FaultRecord
 from graph_utils import (
     COMPENSATOR,
+    SLACK_SENSOR_TIMEOUT_S,
     Children,
     Probe,
     diagnostic_values,
@@ -104,7 +105,13 @@ def test_a_frozen_laser_is_caught_by_the_feedbacks_authority(
 ) -> None:
     _start_rig_and_compensator(
         children,
-        {"compensator": "none", "feedback": "pi", "require_tip_angle": True},
+        {
+            "compensator": "none",
+            "feedback": "pi",
+            "require_tip_angle": True,
+            # A frozen laser still publishes; its staleness is test_compensator's.
+            "sensor_timeout_s": SLACK_SENSOR_TIMEOUT_S,
+        },
         relay_angle=True,
     )
     gains = FeedbackGains.load(SHIPPED)
@@ -178,7 +185,13 @@ def _start(children: Children, sim_params: dict[str, object] | None = None) -> N
         "compensator",
         node_argv(
             "catheter_control.compensator_node",
-            {"compensator": "none", "feedback": "pi", "require_tip_angle": True},
+            {
+                "compensator": "none",
+                "feedback": "pi",
+                "require_tip_angle": True,
+                # Not about a sensor's silence: a busy machine's pauses must not stop these.
+                "sensor_timeout_s": SLACK_SENSOR_TIMEOUT_S,
+            },
         ),
     )
 

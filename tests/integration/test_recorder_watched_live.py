@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from fault_log import FaultRecord
-from graph_utils import Children, Probe, Stamped, gauge_pa, statuses
+from graph_utils import SLACK_SENSOR_TIMEOUT_S, Children, Probe, Stamped, gauge_pa, statuses
 from sensor_msgs.msg import FluidPressure
 from tmpfs import mounted_tmpfs
 
@@ -51,7 +51,17 @@ EXIT_STOPPED = 4
 EXIT_REFUSED = 2
 RECORDER = "catheter/recorder"
 CATHETER_LAB = Path(sys.executable).with_name("catheter-lab")
-FOLLOW = [sys.executable, "-m", "catheter_control.follow_trajectory", "--sim", "--no-progress"]
+# These runs are about the recording, not a sensor's silence: the slack keeps a busy machine's
+# pauses from stopping them first.
+FOLLOW = [
+    sys.executable,
+    "-m",
+    "catheter_control.follow_trajectory",
+    "--sim",
+    "--no-progress",
+    "--sensor-timeout-s",
+    str(SLACK_SENSOR_TIMEOUT_S),
+]
 
 
 def _hold_csv(directory: Path) -> Path:

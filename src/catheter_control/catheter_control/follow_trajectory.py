@@ -156,6 +156,14 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
         "(0: normal scheduling; default: the nodes' own, 50)",
     )
     parser.add_argument(
+        "--sensor-timeout-s",
+        type=float,
+        default=None,
+        help="with --sim/--emulated-rig: the compensator ramps down when a sensor it needs is "
+        "silent this long (its sensor_timeout_s; default: the node's, 0.1 s). A host too busy "
+        "to publish every 100 ms stops runs otherwise; a rig keeps the default",
+    )
+    parser.add_argument(
         "--continue-without-bag",
         action="store_true",
         help="with --sim/--emulated-rig: if the recorder dies or cannot write (disk full), go "

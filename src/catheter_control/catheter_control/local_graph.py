@@ -130,6 +130,12 @@ def start_local_graph(
             "feedforward_shaping": args.feedforward_shaping,
             # The local rig has a laser: stop if it goes quiet (a patient's would not).
             "require_tip_angle": True,
+            # Only when asked: the node's own default and bounds stay the one source.
+            **(
+                {"sensor_timeout_s": args.sensor_timeout_s}
+                if getattr(args, "sensor_timeout_s", None) is not None
+                else {}
+            ),
         },
     )
     devices = None
