@@ -110,4 +110,9 @@ def test_parser_counts_bad_crc(bad: bytes, good: bytes, flip: int, cuts: list[in
     assume(not spurious_frame_before(dac_bridge.decode_frame, data, len(bad)))
     out = feed_in_chunks(parser, data, cuts)
     assert out == [dac_bridge.decode_frame(good)]
-    assert parser.counters.crc_failures == 1
+    # The corrupted frame counts, and so may a sync byte its bytes happen to hold that starts
+    # another candidate failing its CRC (as the laser ADC's parser showed); never more.
+    syncs = sum(b == dac_bridge.SYNC for b in data[: len(bad)])
+    assert 1 <= parser.counters.crc_failures <= syncs
+    if syncs == 1:
+        assert parser.counters.crc_failures == 1
