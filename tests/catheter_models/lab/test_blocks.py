@@ -282,7 +282,7 @@ def test_an_output_block_on_the_core_s_columns_is_the_block_on_their_sum(effect:
     )
 
 
-@pytest.mark.parametrize("core", ["drdpi", "free_pi", "boucwen", "gpi"])
+@pytest.mark.parametrize("core", ["drdpi", "free_pi", "boucwen", "gpi", "viscous_pi"])
 def test_a_greybox_with_every_block_streams_its_prediction(core: str, drdpi_and_data) -> None:
     drdpi, recs = drdpi_and_data
     if core == "drdpi":

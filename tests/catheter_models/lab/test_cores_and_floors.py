@@ -40,6 +40,8 @@ from catheter_models.models.greybox import GreyBox
 from catheter_models.units import pa_to_bar
 
 REPO = Path(__file__).resolve().parents[3]
+LEARNED_CORE_VERDICTS = ("core free_pi", "core viscous_pi")
+"""A core change to one of the two free-weight cores: both learn the loop's shape."""
 
 
 def test_nothing_under_src_imports_the_foreign_plants() -> None:
@@ -532,7 +534,9 @@ def test_on_a_foreign_plant_the_core_is_named_as_the_largest_miss() -> None:
     drdpi = GreyBox().fit([case.train], progress=False)
     result = diagnose(drdpi, [case.train], [case.test], effects=[])
     print(result.text())
-    assert result.verdict == "core free_pi", result.text()
+    # Either learned core fixes the loop's shape (this plant's rate dependence is a damper,
+    # which viscous_pi names and free_pi's rate factor mimics; they differ by a point or two).
+    assert result.verdict in LEARNED_CORE_VERDICTS, result.text()
     assert result.best is not None and result.best.measured_reduction > 0.5
 
 

@@ -22,6 +22,11 @@ a lag does) and leaves an error as large as the effect to be found. So the core 
     (on two foreign plants that was most of the held-out error with nothing hidden). The
     loop shape is otherwise free; the laws it can form are those with the wiping-out
     property (Preisach-like).
+``viscous_pi``
+    ``free_pi``'s plays and tension-grown thresholds with no rate in any threshold, and one
+    explicit viscous lag of the bend of at most 20 ms (a damper beside the bending section's
+    stiffness). Rate-independent by construction but for that term, so it cannot take up a
+    tube's lag, a dead time, creep, drift or a ringing tip before a block is tried.
 ``boucwen``
     A Bouc-Wen differential hysteresis on a smooth-knee pressure, ``dz = ṡ - b|ṡ||z|^(n-1)z -
     g ṡ|z|^n``, ``y = c0 + c1 s + c2 z + c3 s²``: smooth loops whose width saturates, with a
@@ -33,8 +38,8 @@ search (variable projection): with a block's time constant on a grid, the core i
 again at each point, so an effect the core could mimic is still found where it belongs.
 
 Each core is a module of this package beside the operators it runs (``drdpi``, ``gpi``,
-``free_pi``, ``boucwen``), on the contract in :mod:`.base`. A new law is a :class:`Core` in a
-module of its own, listed in :data:`CORES`.
+``free_pi``, ``viscous_pi``, ``boucwen``), on the contract in :mod:`.base`. A new law is a
+:class:`Core` in a module of its own, listed in :data:`CORES`.
 """
 
 from __future__ import annotations
@@ -54,8 +59,11 @@ from catheter_models.models.cores.boucwen import BoucWen
 from catheter_models.models.cores.drdpi import DRDPICore
 from catheter_models.models.cores.free_pi import FreePI
 from catheter_models.models.cores.gpi import GPICore
+from catheter_models.models.cores.viscous_pi import MOST_VISCOUS_S, ViscousPI
 
-CORES: Final[Mapping[str, type[Core]]] = {c.name: c for c in (DRDPICore, FreePI, BoucWen, GPICore)}
+CORES: Final[Mapping[str, type[Core]]] = {
+    c.name: c for c in (DRDPICore, FreePI, BoucWen, GPICore, ViscousPI)
+}
 """Cores by name; the first is the thesis's default."""
 
 
@@ -72,6 +80,7 @@ def make_core(name: str, settings: Mapping[str, Any] | None = None) -> Core:
 
 __all__ = [
     "CORES",
+    "MOST_VISCOUS_S",
     "RATE_FILTER_S",
     "TENSION_REF_BAR",
     "TENSION_SCALE_MAX",
@@ -80,6 +89,7 @@ __all__ = [
     "DRDPICore",
     "FreePI",
     "GPICore",
+    "ViscousPI",
     "make_core",
     "one_blas_thread",
 ]
