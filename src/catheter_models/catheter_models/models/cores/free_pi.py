@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, Final
 
 import numpy as np
 from numba import njit
@@ -23,6 +23,14 @@ from catheter_models.models.cores.base import (
     StateStep,
     _alpha,
 )
+
+# The play grid and tension search every free-weight core starts from (free_pi, viscous_pi).
+MAX_OFFSET_BAR: Final = 2.6
+N_OFFSETS: Final = 14
+THRESHOLDS_BAR: Final = (0.0, 0.03, 0.07, 0.12, 0.2, 0.3, 0.45, 0.65)
+TENSION_SHARES: Final = (0.0, 0.5, 0.8, 0.95)
+TENSION_ONSETS_BAR: Final = (0.0, 0.4, 0.8)
+RIDGE: Final = 1e-6
 
 
 @njit(cache=True)
@@ -111,13 +119,13 @@ class FreePI(Core):
     def __init__(
         self,
         *,
-        max_pressure_bar: float = 2.6,
-        n_offsets: int = 14,
-        thresholds_bar: Sequence[float] = (0.0, 0.03, 0.07, 0.12, 0.2, 0.3, 0.45, 0.65),
+        max_pressure_bar: float = MAX_OFFSET_BAR,
+        n_offsets: int = N_OFFSETS,
+        thresholds_bar: Sequence[float] = THRESHOLDS_BAR,
         betas_s: Sequence[float] = (0.0, 0.01, 0.02, 0.035, 0.05, 0.08),
-        tension_shares: Sequence[float] = (0.0, 0.5, 0.8, 0.95),
-        tension_onsets_bar: Sequence[float] = (0.0, 0.4, 0.8),
-        ridge: float = 1e-6,
+        tension_shares: Sequence[float] = TENSION_SHARES,
+        tension_onsets_bar: Sequence[float] = TENSION_ONSETS_BAR,
+        ridge: float = RIDGE,
     ) -> None:
         if not (max_pressure_bar > 0.0 and 2 <= n_offsets <= 60):
             raise ParameterError("free_pi needs max_pressure_bar > 0 and 2-60 offsets")

@@ -31,7 +31,16 @@ from catheter_models.errors import ParameterError
 from catheter_models.models.base import ModelError
 from catheter_models.models.blocks.base import _lagged_columns, _lowpass1
 from catheter_models.models.cores.base import TENSION_REF_BAR, FloatArray, StateStep
-from catheter_models.models.cores.free_pi import FreePI, _free_pi_kernel
+from catheter_models.models.cores.free_pi import (
+    MAX_OFFSET_BAR,
+    N_OFFSETS,
+    RIDGE,
+    TENSION_ONSETS_BAR,
+    TENSION_SHARES,
+    THRESHOLDS_BAR,
+    FreePI,
+    _free_pi_kernel,
+)
 
 MOST_VISCOUS_S: Final = 0.02
 """Longest viscous time constant the law may have [s]: a bending section's damping (the
@@ -67,13 +76,13 @@ class ViscousPI(FreePI):
     def __init__(
         self,
         *,
-        max_pressure_bar: float = 2.6,
-        n_offsets: int = 14,
-        thresholds_bar: Sequence[float] = (0.0, 0.03, 0.07, 0.12, 0.2, 0.3, 0.45, 0.65),
+        max_pressure_bar: float = MAX_OFFSET_BAR,
+        n_offsets: int = N_OFFSETS,
+        thresholds_bar: Sequence[float] = THRESHOLDS_BAR,
         viscous_s: Sequence[float] = (0.0, 0.004, 0.008, 0.012, 0.016, 0.02),
-        tension_shares: Sequence[float] = (0.0, 0.5, 0.8, 0.95),
-        tension_onsets_bar: Sequence[float] = (0.0, 0.4, 0.8),
-        ridge: float = 1e-6,
+        tension_shares: Sequence[float] = TENSION_SHARES,
+        tension_onsets_bar: Sequence[float] = TENSION_ONSETS_BAR,
+        ridge: float = RIDGE,
     ) -> None:
         if not viscous_s or not all(0.0 <= v <= MOST_VISCOUS_S for v in viscous_s):
             raise ParameterError(
