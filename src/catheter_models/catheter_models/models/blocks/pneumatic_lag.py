@@ -23,12 +23,12 @@ from catheter_models.models.blocks.base import (
     _lowpass1,
     _valve_sized,
 )
-from catheter_models.units import pa_to_bar
+from catheter_models.units import AMBIENT_PRESSURE_PA, pa_to_bar
 
 REFERENCE_GAUGE_BAR: Final = 1.5
 """Gauge pressure at which the time constants and flow limits hold [bar] (rigs quote 1.5 bar)."""
-AMBIENT_BAR: Final = 1.01325
-"""Absolute pressure of the atmosphere the gauge pressures are measured against [bar]."""
+AMBIENT_BAR: Final = float(pa_to_bar(AMBIENT_PRESSURE_PA))
+"""The atmosphere the gauge pressures are measured against [bar] (a float: numba freezes it)."""
 
 
 @njit(cache=True)
