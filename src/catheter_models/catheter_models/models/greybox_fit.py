@@ -58,7 +58,18 @@ def _grid(p: BlockParam, n_params: int) -> FloatArray:
 
 
 class _Unit:
-    """Maps bounded parameters to [0, 1] (log for ranges over a decade) for the polish."""
+    """Maps bounded parameters to [1, 2] (log for ranges over a decade) for the polish.
+
+    Not [0, 1]: the polish's finite differences take a step relative to the value
+    (``diff_step`` times it), so a parameter at the bottom of its range (started there, as
+    bounded least squares puts it, at 1e-10) got a step of 1e-13 and barely moved: a
+    viscous_pi core started with no viscosity on a law with 3 ms of it stopped at 0.17 ms
+    (tests/catheter_models/models/test_viscous_pi.py). On [1, 2] every parameter takes a
+    step of 0.1-0.2 % of its range.
+    """
+
+    LOW: Final = 1.0
+    HIGH: Final = 2.0
 
     def __init__(self, low: FloatArray, high: FloatArray) -> None:
         self.low, self.high = np.asarray(low, dtype=float), np.asarray(high, dtype=float)
@@ -69,11 +80,11 @@ class _Unit:
         out = (v - self.low) / (self.high - self.low)
         lg = self.log
         out[lg] = np.log(v[lg] / self.low[lg]) / np.log(self.high[lg] / self.low[lg])
-        clipped: FloatArray = np.clip(out, 0.0, 1.0)
+        clipped: FloatArray = self.LOW + np.clip(out, 0.0, 1.0)
         return clipped
 
     def from_unit(self, u: FloatArray) -> FloatArray:
-        u = np.clip(u, 0.0, 1.0)
+        u = np.clip(np.asarray(u, dtype=float) - self.LOW, 0.0, 1.0)
         out = self.low + u * (self.high - self.low)
         lg = self.log
         out[lg] = self.low[lg] * np.exp(u[lg] * np.log(self.high[lg] / self.low[lg]))
@@ -204,12 +215,12 @@ class _NonlinearFitter(_Fitter):
         lo_c, hi_c = core.bounds()
         lo_b, hi_b = self.block_bounds()
         n_core = lo_c.size
-        # Blocks' parameters move in [0, 1] (log over ranges wider than a decade): a flow
+        # Blocks' parameters move in [1, 2] (log over ranges wider than a decade): a flow
         # limit of 1e8 Pa/s and a share of 0.2 then take like steps, which a raw vector's
         # relative finite differences and the Jacobian's scaling do not give.
         unit = _Unit(lo_b, hi_b)
-        lo = np.concatenate([lo_c, np.zeros(lo_b.size)])
-        hi = np.concatenate([hi_c, np.ones(hi_b.size)])
+        lo = np.concatenate([lo_c, np.full(lo_b.size, unit.LOW)])
+        hi = np.concatenate([hi_c, np.full(hi_b.size, unit.HIGH)])
         v0 = np.clip(np.concatenate([core.vector(), unit.to_unit(self.pack(blocks))]), lo, hi)
         n_total = sum(x.size for x in self.xs)
 
@@ -348,17 +359,20 @@ class _LinearFitter(_Fitter):
 
     def polish(self, blocks: dict[str, list[float]]) -> tuple[dict[str, list[float]], float]:
         lo_b, hi_b = self.block_bounds()
-        betas = self.free.betas_s
-        beta_hi = max(*betas, 1e-3)
-        lo, hi = np.concatenate([[0.0], lo_b]), np.concatenate([[beta_hi], hi_b])
+        free, rate = self.free, self.rate
+        beta_hi = max(*free.betas_s, 1e-3)
+        # The structure number moves in the core's own coordinate, one it acts on from its
+        # lower bound (a viscous lag's pole, not its time constant).
+        lo = np.concatenate([[free.beta_coordinate(0.0, rate)], lo_b])
+        hi = np.concatenate([[free.beta_coordinate(beta_hi, rate)], hi_b])
         # The beta that does best with these blocks starts the polish.
         beta0 = min(self.betas, key=lambda b: float(np.sum(self._residuals(blocks, b) ** 2)))
         unit = _Unit(lo, hi)
-        v0 = np.concatenate([[beta0], self.pack(blocks)])
+        v0 = np.concatenate([[free.beta_coordinate(beta0, rate)], self.pack(blocks)])
 
         def residuals(u: FloatArray) -> FloatArray:
             v = unit.from_unit(u)
-            return self._residuals(self.unpack(v[1:]), float(v[0]))
+            return self._residuals(self.unpack(v[1:]), free.beta_from_coordinate(v[0], rate))
 
         v_best = v0
         if self.model.polish_evals > 0 and v0.size > 0:
@@ -366,7 +380,7 @@ class _LinearFitter(_Fitter):
             result = optimize.least_squares(
                 residuals,
                 u0,
-                bounds=(0.0, 1.0),
+                bounds=(unit.LOW, unit.HIGH),
                 method="trf",
                 max_nfev=max(8, self.model.polish_evals // 30),
                 diff_step=1e-3,
@@ -374,7 +388,7 @@ class _LinearFitter(_Fitter):
             if 2 * result.cost <= float(np.sum(residuals(u0) ** 2)):
                 v_best = unit.from_unit(result.x)
         blocks_best = self.unpack(v_best[1:])
-        beta = float(v_best[0])
+        beta = free.beta_from_coordinate(float(v_best[0]), rate)
         basis, self.basis = self.basis, None  # the final weights on every play
         self._designs.clear()
         w, _, _ = self._solve(blocks_best, beta)

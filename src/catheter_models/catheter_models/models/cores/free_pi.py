@@ -213,6 +213,19 @@ class FreePI(Core):
             self.tension_onset_bar,
         )
 
+    def beta_coordinate(self, beta_s: float, rate_hz: float) -> float:
+        """The coordinate a polish moves the structure number in (here ``beta_s`` itself).
+
+        A threshold's rate term is linear in ``beta_s``, so it acts from 0 on.
+        """
+        del rate_hz
+        return beta_s
+
+    def beta_from_coordinate(self, coordinate: float, rate_hz: float) -> float:
+        """:meth:`beta_coordinate`'s inverse [s]."""
+        del rate_hz
+        return coordinate
+
     @property
     def fitted(self) -> bool:
         """Whether weights have been solved."""

@@ -117,6 +117,24 @@ class ViscousPI(FreePI):
             return features
         return _lagged_columns(features, rate_hz, (beta_s,), 1.0)
 
+    def beta_coordinate(self, beta_s: float, rate_hz: float) -> float:
+        """The viscous lag's discrete pole ``exp(-1 / (rate * tau))``, which a polish moves.
+
+        The exact discretisation is flat in the time constant below about a fifth of a
+        sample (every derivative of the pole vanishes at 0), so a polish started at no
+        viscosity could never leave it: with the Bouc-Wen plant's pneumatic lag
+        (development seed 5) it stayed there at 0.40 deg on training data (0.49 held out),
+        where the pole, on which each step of the lag depends linearly, leads it to 11 ms
+        and 0.12 deg (0.23 held out).
+        """
+        return math.exp(-1.0 / (rate_hz * beta_s)) if beta_s > 0.0 else 0.0
+
+    def beta_from_coordinate(self, coordinate: float, rate_hz: float) -> float:
+        """:meth:`beta_coordinate`'s inverse [s] (0 for a pole at or below 0)."""
+        if coordinate <= 0.0:
+            return 0.0
+        return min(-1.0 / (rate_hz * math.log(min(coordinate, 1.0 - 1e-12))), MOST_VISCOUS_S)
+
     def _checked(self) -> tuple[FloatArray, float]:
         if self.weights is None or self.beta_s is None:
             raise ModelError("viscous_pi core is not fitted")
