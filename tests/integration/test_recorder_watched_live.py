@@ -424,16 +424,27 @@ def test_commission_recording_stops_when_its_recorder_dies(
         "recorder exited (code -9)" in said and "went unrecorded from" in said,
         said,
     )
-    after = gauge_pa([m for m in commands if m.mono_s > killed[0]])
+    kept = [m for m in commands if m.mono_s > killed[0]]
+    after = gauge_pa(kept)
+    stamps_s = np.array([m.msg.header.stamp.sec + 1e-9 * m.msg.header.stamp.nanosec for m in kept])
     # The signal goes on (up and down) until excite is stopped; its last descent is the ramp.
     rises = np.flatnonzero(np.diff(after) > 1.0)
-    ramp = after[rises[-1] + 1 :] if rises.size else after
-    largest_drop_pa = float(-np.diff(ramp).min(initial=0.0))
+    start = int(rises[-1]) + 1 if rises.size else 0
+    ramp, ramp_s = after[start:], stamps_s[start:]
+    # Judged per second of the commands' own stamps, not per message: a tick the loop
+    # skipped on a loaded machine is never sent (its stamp is a gap), and a message the probe
+    # missed is a gap too; either leaves a larger step at the same slope (a run beside two
+    # busy loops, a benchmark and a second test run saw 8,771 Pa between two messages).
+    drop_pa = -np.diff(ramp)
+    gap_s = np.maximum(np.diff(ramp_s), 1.0 / CONTROL_RATE_HZ)
+    steepest_pa_per_s = float(np.max(drop_pa / gap_s, initial=0.0))
+    largest_drop_pa = float(drop_pa.max(initial=0.0))
     fault.check(
         "excite ramped the pressure down (no step to zero)",
-        bool(after[-1] <= VENTED_PA) and largest_drop_pa <= MAX_SLEW_PA_PER_S / CONTROL_RATE_HZ,
-        f"last descent from {ramp[0]:.0f} to {after[-1]:.0f} Pa, largest drop "
-        f"{largest_drop_pa:.0f} Pa a tick",
+        bool(after[-1] <= VENTED_PA) and steepest_pa_per_s <= MAX_SLEW_PA_PER_S + 1.0,
+        f"last descent from {ramp[0]:.0f} to {after[-1]:.0f} Pa, at most "
+        f"{steepest_pa_per_s / 1e5:.2f} bar/s (largest drop {largest_drop_pa:.0f} Pa "
+        "between two messages)",
     )
     # Safe once the ramp's last command (zero) went out: the signal itself passes zero before.
     fault.safe_after(commands[-1].mono_s - killed[0])
