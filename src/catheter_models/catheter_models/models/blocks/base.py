@@ -251,9 +251,14 @@ class LagMixInverse(Inverse):
         return share + self._share * sum(self._state)
 
 
+def _pole(rate_hz: float, time_constant_s: float) -> float:
+    """The discrete pole of a first-order lag, exactly discretised: ``exp(-1 / (rate * tau))``."""
+    return math.exp(-1.0 / (rate_hz * time_constant_s))
+
+
 def _lowpass1(x: FloatArray, rate_hz: float, time_constant_s: float) -> FloatArray:
     """Exact discretisation of a first-order lag, starting at the first sample (rest)."""
-    a = math.exp(-1.0 / (rate_hz * time_constant_s))
+    a = _pole(rate_hz, time_constant_s)
     y, _ = sps.lfilter([1.0 - a], [1.0, -a], x, zi=[a * x[0]])
     out: FloatArray = np.asarray(y, dtype=float)
     return out
@@ -289,7 +294,7 @@ def _lagged_columns(
     m: FloatArray, rate_hz: float, time_constants_s: Sequence[float], fraction: float
 ) -> FloatArray:
     """:func:`_lags_columns` for lags given by their time constants [s]."""
-    poles = np.array([math.exp(-1.0 / (rate_hz * tau)) for tau in time_constants_s])
+    poles = np.array([_pole(rate_hz, tau) for tau in time_constants_s])
     out = np.empty_like(m)
     _lags_columns(np.ascontiguousarray(m, dtype=np.float64), poles, float(fraction), out)
     return out

@@ -29,7 +29,7 @@ import numpy as np
 
 from catheter_models.errors import ParameterError
 from catheter_models.models.base import ModelError
-from catheter_models.models.blocks.base import _lagged_columns, _lowpass1
+from catheter_models.models.blocks.base import _lagged_columns, _lowpass1, _pole
 from catheter_models.models.cores.base import TENSION_REF_BAR, FloatArray, StateStep
 from catheter_models.models.cores.free_pi import (
     MAX_OFFSET_BAR,
@@ -127,7 +127,7 @@ class ViscousPI(FreePI):
         where the pole, on which each step of the lag depends linearly, leads it to 11 ms
         and 0.12 deg (0.23 held out).
         """
-        return math.exp(-1.0 / (rate_hz * beta_s)) if beta_s > 0.0 else 0.0
+        return _pole(rate_hz, beta_s) if beta_s > 0.0 else 0.0
 
     def beta_from_coordinate(self, coordinate: float, rate_hz: float) -> float:
         """:meth:`beta_coordinate`'s inverse [s] (0 for a pole at or below 0)."""
