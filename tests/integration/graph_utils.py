@@ -39,8 +39,8 @@ NOISE_MARGIN_PA = 2000.0
 SLACK_SENSOR_TIMEOUT_S = 0.5
 """The compensator's ``sensor_timeout_s`` for tests that are not about it. Beside two busy
 loops on a 2-core machine, the rig's and the laser's Python processes go quiet for 100 ms or more
-at times, and the node's 0.1 s default then ramps down, as it must on a rig: the tests of
-that stop keep the default (test_faults, test_compensator's timeout tests)."""
+at times, and the node's 0.1 s default then ramps down, as it must on a rig. test_compensator's
+timeout tests keep the default; test_faults judges the stop of a killed rig against this limit."""
 
 
 def unique_domain_id() -> int:

@@ -35,6 +35,7 @@ from graph_utils import (
     MAX_PRESSURE_PA,
     NOISE_MARGIN_PA,
     SIM,
+    SLACK_SENSOR_TIMEOUT_S,
     Children,
     Probe,
     Stamped,
@@ -69,7 +70,11 @@ pytestmark = [
 
 VENTED_PA = 0.1e5
 WATCHDOG_S = 0.1
-"""sim_hardware's command_timeout_s and the compensator's sensor_timeout_s (defaults)."""
+"""sim_hardware's command_timeout_s (its default): how soon the rig vents without commands."""
+SENSOR_TIMEOUT_S = SLACK_SENSOR_TIMEOUT_S
+"""The compensator's stale limit here. Its 0.1 s default stopped the bend before the fault on a
+busy machine (the rig's process went quiet for over 100 ms; docs/reliability.md); what these
+tests judge is what follows the fault, so the rig's stop is judged against this limit."""
 SLEW_PA_PER_S = 2.0e6
 SAMPLE_S = 1.0 / 250.0
 HOLD_20_DEG = [(0.0, 0.0), (2.0, 20.0), (40.0, 20.0)]
@@ -122,7 +127,11 @@ class SimGraph:
         specs = sim_graph_specs(
             self.bag,
             {"source": "test_faults"},
-            compensator_params={"require_tip_angle": True, **compensator},
+            compensator_params={
+                "require_tip_angle": True,
+                "sensor_timeout_s": SENSOR_TIMEOUT_S,
+                **compensator,
+            },
         )
         self.graph: ProcessGraph = children.graph(specs)
         self.children = children
@@ -243,7 +252,7 @@ def test_killed_compensator(sim: SimGraph, fault: FaultRecord) -> None:
 
 @pytest.mark.fault(
     "kill -9 sim_hardware (the rig: driver and sensors) mid-trajectory",
-    safe="compensator stopped on pressure/measured stale, command ramped to 0",
+    safe="compensator stopped on pressure/measured stale (limit 0.5 s here), command ramped to 0",
 )
 def test_killed_rig(sim: SimGraph, fault: FaultRecord) -> None:
     kill = sim.kill_bent("sim_hardware")
@@ -260,9 +269,9 @@ def test_killed_rig(sim: SimGraph, fault: FaultRecord) -> None:
     sim.probe.spin_for(0.5)
     zero_s = _first_time(sim.commands, t_kill, lambda v: v == 0.0)
     fault.safe_after(zero_s - t_kill)
-    # Stale after 100 ms (the first of the two sensor streams to be missed), then down from
+    # Stale after the limit (the first of the two sensor streams to be missed), then down from
     # 2 bar at the slew limit (20 bar/s: 0.1 s).
-    bound_s = WATCHDOG_S + 2.0e5 / SLEW_PA_PER_S + 0.1
+    bound_s = SENSOR_TIMEOUT_S + 2.0e5 / SLEW_PA_PER_S + 0.1
     fault.check(
         "command ramped to 0 after the sensors went quiet",
         zero_s - t_kill <= bound_s,
