@@ -61,6 +61,9 @@ class BlockParam:
     absent: float | None = None
     """The value a model saved before this parameter existed is loaded with (the block's
     earlier form); ``None``: a saved model must hold it."""
+    searched: bool = True
+    """Whether the identification's grid covers it; ``False``: held at ``absent`` there and
+    moved by the polish only (a refinement whose grid would multiply every search's cost)."""
 
     def display(self, value: float) -> str:
         """The value as a person reads it (e.g. ms, Hz, deg/min)."""
