@@ -48,9 +48,10 @@ def test_a_lag_whose_flow_chokes_ramps_then_relaxes() -> None:
 
 def test_a_lag_vents_at_its_own_time_constant() -> None:
     down = 1.0 - step()
-    y = block("pneumatic_lag").apply(down, RATE_HZ, [0.1, 2.0, 1e8, 1.0, 0.0, 1.0, 0.0])  # vents in 0.2 s
+    vents_in_0_2_s = [0.1, 2.0, 1e8, 1.0, 0.0, 1.0, 0.0]
+    y = block("pneumatic_lag").apply(down, RATE_HZ, vents_in_0_2_s)
     assert y[250 + 49] == pytest.approx(math.exp(-1), abs=1e-9)
-    rise = block("pneumatic_lag").apply(step(), RATE_HZ, [0.1, 2.0, 1e8, 1.0, 0.0, 1.0, 0.0])
+    rise = block("pneumatic_lag").apply(step(), RATE_HZ, vents_in_0_2_s)
     assert rise[250 + 24] == pytest.approx(1 - math.exp(-1), abs=1e-9)  # fills in 0.1 s
 
 

@@ -344,17 +344,17 @@ def _command_for(p: float, target: float, gain: float, dt_s: float, terms: LagTe
     """
     low = p + (target - p) / gain
     span = max(target - p, 1e-9) / gain
-    if _short_by(low, p, target, gain, dt_s, terms) <= 0.0:
+    if _short_by(low, p, target, dt_s, terms) <= 0.0:
         return low
     high = low + span
-    while _short_by(high, p, target, gain, dt_s, terms) > 0.0:
+    while _short_by(high, p, target, dt_s, terms) > 0.0:
         if high - p > COMMAND_REACH_BAR:
             return high
         span *= 2.0
         high = low + span
     for _ in range(60):
         mid = 0.5 * (low + high)
-        if _short_by(mid, p, target, gain, dt_s, terms) > 0.0:
+        if _short_by(mid, p, target, dt_s, terms) > 0.0:
             low = mid
         else:
             high = mid
@@ -362,7 +362,7 @@ def _command_for(p: float, target: float, gain: float, dt_s: float, terms: LagTe
 
 
 @njit(cache=True)
-def _short_by(u: float, p: float, target: float, gain: float, dt_s: float, terms: LagTerms) -> float:
+def _short_by(u: float, p: float, target: float, dt_s: float, terms: LagTerms) -> float:
     """How far below ``target`` [bar] the filling command ``u`` leaves the muscle."""
-    _, limit = _gain_and_limit(p, u, True, dt_s, terms)
+    gain, limit = _gain_and_limit(p, u, True, dt_s, terms)
     return target - p - _saturated((u - p) * gain, limit, terms[5])
