@@ -47,7 +47,9 @@ def _grid(p: BlockParam, n_params: int) -> FloatArray:
     if not p.searched:
         return np.array([p.initial if p.absent is None else p.absent])
     n = p.grid_points or GRID_POINTS.get(n_params, 3)
-    if p.low >= 0.0 and p.high > 0.0:
+    if p.grid:
+        points = np.array(p.grid, dtype=float)
+    elif p.low >= 0.0 and p.high > 0.0:
         low = p.low if p.low > 0.0 else 1e-2 * p.high
         points = np.geomspace(low, p.high, n)
         if p.low == 0.0:

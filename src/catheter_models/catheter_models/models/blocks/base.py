@@ -61,6 +61,9 @@ class BlockParam:
     absent: float | None = None
     """The value a model saved before this parameter existed is loaded with (the block's
     earlier form); ``None``: a saved model must hold it."""
+    grid: tuple[float, ...] = ()
+    """Explicit points of the search grid (empty: ``grid_points`` spaced over the range):
+    for a range widened after a grid was validated, so the search stays what it was."""
     searched: bool = True
     """Whether the identification's grid covers it; ``False``: held at ``absent`` there and
     moved by the polish only (a refinement whose grid would multiply every search's cost)."""

@@ -78,7 +78,8 @@ def _saturated(step: float, limit: float, linear_share: float) -> float:
     ``linear_share`` 1 is a hard limit (an orifice choked at once); below 1 the step is
     linear up to ``linear_share * limit`` and approaches the limit along a tanh above it,
     with the slope continuous at the knee (the flow through a restriction grows ever more
-    slowly with the pressure drop before it chokes).
+    slowly with the pressure drop before it chokes). At 0 it is ``limit * tanh(step /
+    limit)``, a plain form of its own, as 1 is.
     """
     size = abs(step)
     knee = linear_share * limit
@@ -204,12 +205,14 @@ class PneumaticLag(Block):
         BlockParam(
             "pressure_exponent",
             "1",
-            -1.0,
+            -2.0,
             2.0,
             0.0,
             "how much faster the muscle fills and vents at a higher absolute pressure "
             "(speed ~ p_abs ** exponent)",
-            grid_points=3,
+            # Below -1 since a muscle whose volume grows steeply fills ever slower; the grid
+            # stays the one validated over -1..2.
+            grid=(-1.0, 0.5, 2.0),
             absent=0.0,
         ),
         # The last two refine a flow limit the search has already found; a grid over them
@@ -217,7 +220,7 @@ class PneumaticLag(Block):
         BlockParam(
             "flow_linear_share",
             "1",
-            0.05,
+            0.0,
             1.0,
             1.0,
             "share of the flow limit up to which the flow is linear in the pressure drop "
@@ -230,7 +233,7 @@ class PneumaticLag(Block):
             "upstream_exponent",
             "1",
             0.0,
-            2.0,
+            4.0,
             0.0,
             "how the flow limit grows with the absolute pressure upstream of the tube "
             "(the valve's when filling, the muscle's when venting)",
