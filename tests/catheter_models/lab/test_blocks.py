@@ -289,6 +289,7 @@ STREAM_VALUES = {
     "drift": [math.radians(5.0) / 60.0, 3.3],  # below its bound: the signal sees it settle
     "slow_fill": [0.2, 1.7],
     "output_lag": [0.05],
+    "input_lag": [0.05],
 }
 
 

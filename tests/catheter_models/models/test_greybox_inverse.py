@@ -31,6 +31,7 @@ VALUES = {
     "drift": [math.radians(5.0) / 60.0, 3.3],
     "slow_fill": [0.2, 1.7],
     "output_lag": [0.05],
+    "input_lag": [0.05],
 }
 EXACT_BLOCKS = [e for e in FORMS if e != "tip_dynamics"]
 

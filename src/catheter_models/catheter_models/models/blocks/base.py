@@ -98,6 +98,11 @@ class Block(ABC):
     """A form outside the catalogue (:data:`CHECKS`) that gives the same signature from the
     core's other side. Where it fits the held-out data clearly better, the effect is not
     where this block puts it, and the diagnosis does not name it ('': no rival)."""
+    side_form: ClassVar[str] = ""
+    """The form this block's side is judged in against its :attr:`rival`: a check of the
+    rival's own shape on this block's side ('': the block itself). A block grown into a
+    family fits more than its rival's one time constant can, whichever side the effect is
+    on; only like against like tells the side."""
     scheduled: ClassVar[bool] = False
     """Its response depends on the signal entering it (the tip's damping follows the bend), so
     a core linear in its weights and the block are solved in passes, each scheduling the block

@@ -247,6 +247,7 @@ class PneumaticLag(Block):
     # Before a hysteresis a lag shifts each reversal; after it, it rounds the reversal's
     # corner. Both remove much of the same error, so only the better fit tells the side.
     rival = "output_lag"
+    side_form = "input_lag"
 
     def unlike_effect(self, values: Sequence[float]) -> list[str]:
         """A lag shorter than :data:`SHORTEST_TUBE_S` both ways is the valve's own response."""
