@@ -25,7 +25,26 @@ from catheter_models.models.blocks.base import (
 )
 
 
-class OutputLag(Block):
+class _FirstOrderLag(Block):
+    """One time constant, on whichever side of the core a subclass puts it."""
+
+    primary = "time_constant_s"
+    needs = "pressure changes of a few hundred ms or faster"
+
+    def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:
+        """The signal (bar before the core, deg after it) through a first-order lag."""
+        return _lowpass1(x, rate_hz, values[0])
+
+    def streamer(self, rate_hz: float, values: Sequence[float]) -> Step:
+        """The lag, one sample at a time."""
+        return _Lowpass1Stream(rate_hz, values[0]).step
+
+    def inverse(self, rate_hz: float, values: Sequence[float]) -> Inverse:
+        """The signal before the lag that gives the one wanted now (exact, causal)."""
+        return LagMixInverse(rate_hz, (values[0],), 1.0)
+
+
+class OutputLag(_FirstOrderLag):
     """A first-order lag on the bend, after the core: not in the catalogue.
 
     The sensor's own filter, or a bend that follows its muscle slowly, looks like this. The
@@ -39,12 +58,6 @@ class OutputLag(Block):
     params = (
         BlockParam("time_constant_s", "s", 0.002, 0.5, 0.03, "lag of bend behind core", 1e3, "ms"),
     )
-    primary = "time_constant_s"
-    needs = "pressure changes of a few hundred ms or faster"
-
-    def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:
-        """The bend [deg] through a first-order lag."""
-        return _lowpass1(x, rate_hz, values[0])
 
     def apply_columns(
         self, m: FloatArray, rate_hz: float, values: Sequence[float], reference: FloatArray
@@ -52,16 +65,8 @@ class OutputLag(Block):
         """A lag is linear: every column at once."""
         return _lagged_columns(m, rate_hz, (values[0],), 1.0)
 
-    def streamer(self, rate_hz: float, values: Sequence[float]) -> Step:
-        """The lag, one sample at a time."""
-        return _Lowpass1Stream(rate_hz, values[0]).step
 
-    def inverse(self, rate_hz: float, values: Sequence[float]) -> Inverse:
-        """The bend before the lag that gives the bend wanted now (exact, causal)."""
-        return LagMixInverse(rate_hz, (values[0],), 1.0)
-
-
-class InputLag(Block):
+class InputLag(_FirstOrderLag):
     """A first-order lag on the pressure, before the core: not in the catalogue.
 
     The pneumatic lag's first form. The diagnosis fits it only to judge which side of the
@@ -78,20 +83,6 @@ class InputLag(Block):
             "time_constant_s", "s", 0.002, 0.5, 0.03, "lag of muscle behind valve", 1e3, "ms"
         ),
     )
-    primary = "time_constant_s"
-    needs = "pressure changes of a few hundred ms or faster"
-
-    def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:
-        """The pressure [bar] through a first-order lag."""
-        return _lowpass1(x, rate_hz, values[0])
-
-    def streamer(self, rate_hz: float, values: Sequence[float]) -> Step:
-        """The lag, one sample at a time."""
-        return _Lowpass1Stream(rate_hz, values[0]).step
-
-    def inverse(self, rate_hz: float, values: Sequence[float]) -> Inverse:
-        """The pressure before the lag that gives the pressure wanted now (exact, causal)."""
-        return LagMixInverse(rate_hz, (values[0],), 1.0)
 
 
 class SlowFill(Block):
