@@ -34,7 +34,7 @@ def test_the_shape_is_the_chain_s_delay_lag_and_tip_at_the_typical_bend() -> Non
         chain(
             {
                 "transport_delay": [0.04],
-                "pneumatic_lag": [0.03, 1.0, 1e8, 1.0, 0.0, 1.0, 0.0],
+                "pneumatic_lag": [0.03, 1.0, 1e8, 1.0, 0.0],
                 "tip_dynamics": [4.0, 0.1, 0.2],
             }
         ),

@@ -25,7 +25,7 @@ def step(n: int = 2500, at: int = 250) -> np.ndarray:
     return x
 
 
-PLAIN_LAG = [0.1, 1.0, 1e8, 1.0, 0.0, 1.0, 0.0]  # no asymmetry, flow limit, pressure dependence
+PLAIN_LAG = [0.1, 1.0, 1e8, 1.0, 0.0]  # no asymmetry, no flow limit, no pressure dependence
 
 
 def test_lag_reaches_63_percent_after_one_time_constant() -> None:
@@ -38,7 +38,7 @@ def test_lag_reaches_63_percent_after_one_time_constant() -> None:
 def test_a_lag_whose_flow_chokes_ramps_then_relaxes() -> None:
     # 2 bar/s at most: a 1 bar step ramps for the first half second, where the plain
     # lag's own slope (1 bar / 0.1 s) is faster, then relaxes as the plain lag does.
-    y = block("pneumatic_lag").apply(step(), RATE_HZ, [0.1, 1.0, 2e5, 1.0, 0.0, 1.0, 0.0])
+    y = block("pneumatic_lag").apply(step(), RATE_HZ, [0.1, 1.0, 2e5, 1.0, 0.0])
     assert np.diff(y).max() == pytest.approx(2.0 / RATE_HZ, rel=1e-9)
     assert y[250 + 49] == pytest.approx(50 * 2.0 / RATE_HZ, rel=1e-9)  # still on the ramp
     assert y[-1] == pytest.approx(1.0, abs=1e-3)
@@ -48,29 +48,20 @@ def test_a_lag_whose_flow_chokes_ramps_then_relaxes() -> None:
 
 def test_a_lag_vents_at_its_own_time_constant() -> None:
     down = 1.0 - step()
-    vents_in_0_2_s = [0.1, 2.0, 1e8, 1.0, 0.0, 1.0, 0.0]
-    y = block("pneumatic_lag").apply(down, RATE_HZ, vents_in_0_2_s)
+    y = block("pneumatic_lag").apply(down, RATE_HZ, [0.1, 2.0, 1e8, 1.0, 0.0])  # vents in 0.2 s
     assert y[250 + 49] == pytest.approx(math.exp(-1), abs=1e-9)
-    rise = block("pneumatic_lag").apply(step(), RATE_HZ, vents_in_0_2_s)
+    rise = block("pneumatic_lag").apply(step(), RATE_HZ, [0.1, 2.0, 1e8, 1.0, 0.0])
     assert rise[250 + 24] == pytest.approx(1 - math.exp(-1), abs=1e-9)  # fills in 0.1 s
 
 
 def test_a_lag_saved_before_venting_and_flow_limits_loads_as_the_plain_lag() -> None:
-    assert BLOCKS["pneumatic_lag"].check({"time_constant_s": 0.04}) == [
-        0.04,
-        1.0,
-        1e8,
-        1.0,
-        0.0,
-        1.0,
-        0.0,
-    ]
+    assert BLOCKS["pneumatic_lag"].check({"time_constant_s": 0.04}) == [0.04, 1.0, 1e8, 1.0, 0.0]
 
 
 def test_a_lag_vents_against_its_own_flow_limit() -> None:
     # Filling at most 4 bar/s, venting at most 2 bar/s (a smaller exhaust port): a 1 bar step
     # up ramps at 4 bar/s, the step down at 2 bar/s, each until the plain lag is slower.
-    values = [0.02, 1.0, 4e5, 0.5, 0.0, 1.0, 0.0]
+    values = [0.02, 1.0, 4e5, 0.5, 0.0]
     up = block("pneumatic_lag").apply(step(), RATE_HZ, values)
     down = block("pneumatic_lag").apply(1.0 - step(), RATE_HZ, values)
     assert np.diff(up).max() == pytest.approx(4.0 / RATE_HZ, rel=1e-9)
@@ -85,7 +76,7 @@ def test_a_lag_that_depends_on_the_pressure_is_quicker_where_its_exponent_says(
     # The same 0.1 bar step from 0.4 and from 2.4 bar gauge: the time to 63 % scales as the
     # absolute pressure to the minus exponent (the reference, 1.5 bar, takes 0.1 s).
     lag = block("pneumatic_lag")
-    values = [0.1, 1.0, 1e8, 1.0, exponent, 1.0, 0.0]
+    values = [0.1, 1.0, 1e8, 1.0, exponent]
 
     def time_to_63_percent_s(base_bar: float) -> float:
         y = lag.apply(base_bar + 0.1 * step(), RATE_HZ, values)
@@ -94,36 +85,6 @@ def test_a_lag_that_depends_on_the_pressure_is_quicker_where_its_exponent_says(
     low, high = time_to_63_percent_s(0.4), time_to_63_percent_s(2.4)
     expected = ((2.4 + 1.01325) / (0.4 + 1.01325)) ** exponent
     assert low / high == pytest.approx(expected, rel=0.1)
-
-
-def test_a_smooth_flow_limit_bends_from_linear_to_the_limit() -> None:
-    # Limit 4 bar/s, linear up to half of it: a step small enough for the knee moves as the
-    # hard-limited lag does, a large one never reaches the limit's slope but comes closer to
-    # it than the knee, and both settle where the plain lag does.
-    lag = block("pneumatic_lag")
-    hard = [0.05, 1.0, 4e5, 1.0, 0.0, 1.0, 0.0]
-    smooth = [0.05, 1.0, 4e5, 1.0, 0.0, 0.5, 0.0]
-    small = 0.05 * step()  # its largest step, 0.05 * (1 - e^-0.08) bar, is below the knee
-    assert np.array_equal(lag.apply(small, RATE_HZ, smooth), lag.apply(small, RATE_HZ, hard))
-    rise = np.diff(lag.apply(step(), RATE_HZ, smooth))
-    limit_bar = 4.0 / RATE_HZ
-    assert 0.5 * limit_bar < rise.max() < limit_bar
-    assert lag.apply(step(), RATE_HZ, smooth)[-1] == pytest.approx(1.0, abs=1e-3)
-
-
-def test_an_upstream_exponent_fills_faster_from_a_higher_supply() -> None:
-    # The flow limit grows with the valve's absolute pressure when filling: the same 0.5 bar
-    # step ramps faster towards 2.5 bar than towards 0.5 bar, by the exponent's ratio of
-    # the absolute pressures; venting reads the muscle's pressure instead.
-    lag = block("pneumatic_lag")
-    values = [0.02, 1.0, 2e5, 1.0, 0.0, 1.0, 1.0]
-    low = np.diff(lag.apply(0.5 * step(), RATE_HZ, values)).max()
-    high = np.diff(lag.apply(2.0 + 0.5 * step(), RATE_HZ, values)).max()
-    assert high / low == pytest.approx((2.5 + 1.01325) / (0.5 + 1.01325), rel=1e-3)
-    plain = [0.02, 1.0, 2e5, 1.0, 0.0, 1.0, 0.0]
-    assert np.diff(lag.apply(0.5 * step(), RATE_HZ, plain)).max() == pytest.approx(
-        2.0 / RATE_HZ, rel=1e-9
-    )
 
 
 def test_delay_shifts_by_the_delay() -> None:
@@ -283,13 +244,12 @@ def test_a_model_file_that_lists_an_effect_without_parameters_asks_for_a_refit(
 # Off-grid values (a delay of 37.3 samples, a tip between sub-steps): the stream must match.
 STREAM_VALUES = {
     "transport_delay": [0.1491],
-    "pneumatic_lag": [0.08, 1.7, 5e5, 0.6, 0.7, 0.5, 1.0],
+    "pneumatic_lag": [0.08, 1.7, 5e5, 0.6, 0.7],
     "creep": [0.3, 1.2, 6.0],
     "tip_dynamics": [6.3, 0.07, 2.0],
     "drift": [math.radians(5.0) / 60.0, 3.3],  # below its bound: the signal sees it settle
     "slow_fill": [0.2, 1.7],
     "output_lag": [0.05],
-    "input_lag": [0.05],
 }
 
 

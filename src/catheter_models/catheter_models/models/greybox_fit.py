@@ -42,14 +42,9 @@ def _grid(p: BlockParam, n_params: int) -> FloatArray:
 
     A parameter's ``absent`` value (the block's earlier, simpler form: one creep lag, a lag
     without a flow limit) is always on it, so the search meets the simpler form too.
-    A parameter that is not ``searched`` has its earlier form's value alone.
     """
-    if not p.searched:
-        return np.array([p.initial if p.absent is None else p.absent])
     n = p.grid_points or GRID_POINTS.get(n_params, 3)
-    if p.grid:
-        points = np.array(p.grid, dtype=float)
-    elif p.low >= 0.0 and p.high > 0.0:
+    if p.low >= 0.0 and p.high > 0.0:
         low = p.low if p.low > 0.0 else 1e-2 * p.high
         points = np.geomspace(low, p.high, n)
         if p.low == 0.0:

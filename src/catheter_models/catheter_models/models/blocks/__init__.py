@@ -116,7 +116,7 @@ def ordered(effects: Sequence[str]) -> tuple[str, ...]:
 
 
 # The built-in effects, in chain order within each side.
-from catheter_models.models.blocks.checks import InputLag, OutputLag, SlowFill  # noqa: E402
+from catheter_models.models.blocks.checks import OutputLag, SlowFill  # noqa: E402
 from catheter_models.models.blocks.creep import Creep  # noqa: E402
 from catheter_models.models.blocks.drift import Drift  # noqa: E402
 from catheter_models.models.blocks.pneumatic_lag import PneumaticLag  # noqa: E402
@@ -125,7 +125,7 @@ from catheter_models.models.blocks.transport_delay import TransportDelay  # noqa
 
 for _catalogued in (TransportDelay, PneumaticLag, Creep, TipDynamics, Drift):
     register(_catalogued)
-for _check in (InputLag, SlowFill, OutputLag):
+for _check in (SlowFill, OutputLag):
     register(_check, catalogue=False)
 
 __all__ = [
@@ -140,7 +140,6 @@ __all__ = [
     "BlockParam",
     "Creep",
     "Drift",
-    "InputLag",
     "OutputLag",
     "PneumaticLag",
     "Side",

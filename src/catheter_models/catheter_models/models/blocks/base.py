@@ -61,12 +61,6 @@ class BlockParam:
     absent: float | None = None
     """The value a model saved before this parameter existed is loaded with (the block's
     earlier form); ``None``: a saved model must hold it."""
-    grid: tuple[float, ...] = ()
-    """Explicit points of the search grid (empty: ``grid_points`` spaced over the range):
-    for a range widened after a grid was validated, so the search stays what it was."""
-    searched: bool = True
-    """Whether the identification's grid covers it; ``False``: held at ``absent`` there and
-    moved by the polish only (a refinement whose grid would multiply every search's cost)."""
 
     def display(self, value: float) -> str:
         """The value as a person reads it (e.g. ms, Hz, deg/min)."""
@@ -98,11 +92,6 @@ class Block(ABC):
     """A form outside the catalogue (:data:`CHECKS`) that gives the same signature from the
     core's other side. Where it fits the held-out data clearly better, the effect is not
     where this block puts it, and the diagnosis does not name it ('': no rival)."""
-    side_form: ClassVar[str] = ""
-    """The form this block's side is judged in against its :attr:`rival`: a check of the
-    rival's own shape on this block's side ('': the block itself). A block grown into a
-    family fits more than its rival's one time constant can, whichever side the effect is
-    on; only like against like tells the side."""
     scheduled: ClassVar[bool] = False
     """Its response depends on the signal entering it (the tip's damping follows the bend), so
     a core linear in its weights and the block are solved in passes, each scheduling the block

@@ -1,8 +1,7 @@
 """Forms outside the catalogue, fitted only as a catalogue block's rival, never named.
 
 ``output_lag`` rivals the pneumatic lag from the core's other side (a lag on the sensor),
-``slow_fill`` rivals creep from the input side. ``input_lag`` is ``output_lag``'s shape before
-the core: the pneumatic lag's side is judged with it, like against like.
+``slow_fill`` rivals creep from the input side.
 """
 
 from __future__ import annotations
@@ -25,26 +24,7 @@ from catheter_models.models.blocks.base import (
 )
 
 
-class _FirstOrderLag(Block):
-    """One time constant, on whichever side of the core a subclass puts it."""
-
-    primary = "time_constant_s"
-    needs = "pressure changes of a few hundred ms or faster"
-
-    def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:
-        """The signal (bar before the core, deg after it) through a first-order lag."""
-        return _lowpass1(x, rate_hz, values[0])
-
-    def streamer(self, rate_hz: float, values: Sequence[float]) -> Step:
-        """The lag, one sample at a time."""
-        return _Lowpass1Stream(rate_hz, values[0]).step
-
-    def inverse(self, rate_hz: float, values: Sequence[float]) -> Inverse:
-        """The signal before the lag that gives the one wanted now (exact, causal)."""
-        return LagMixInverse(rate_hz, (values[0],), 1.0)
-
-
-class OutputLag(_FirstOrderLag):
+class OutputLag(Block):
     """A first-order lag on the bend, after the core: not in the catalogue.
 
     The sensor's own filter, or a bend that follows its muscle slowly, looks like this. The
@@ -58,6 +38,12 @@ class OutputLag(_FirstOrderLag):
     params = (
         BlockParam("time_constant_s", "s", 0.002, 0.5, 0.03, "lag of bend behind core", 1e3, "ms"),
     )
+    primary = "time_constant_s"
+    needs = "pressure changes of a few hundred ms or faster"
+
+    def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:
+        """The bend [deg] through a first-order lag."""
+        return _lowpass1(x, rate_hz, values[0])
 
     def apply_columns(
         self, m: FloatArray, rate_hz: float, values: Sequence[float], reference: FloatArray
@@ -65,24 +51,13 @@ class OutputLag(_FirstOrderLag):
         """A lag is linear: every column at once."""
         return _lagged_columns(m, rate_hz, (values[0],), 1.0)
 
+    def streamer(self, rate_hz: float, values: Sequence[float]) -> Step:
+        """The lag, one sample at a time."""
+        return _Lowpass1Stream(rate_hz, values[0]).step
 
-class InputLag(_FirstOrderLag):
-    """A first-order lag on the pressure, before the core: not in the catalogue.
-
-    The pneumatic lag's first form. The diagnosis fits it only to judge which side of the
-    hysteresis a lag is on against :class:`OutputLag`, the same shape after the core: the
-    pneumatic lag's family (venting, flow limits, pressure dependence) can fit some of a
-    sensor's lag from the wrong side by its extra freedom, which says nothing of the side.
-    """
-
-    effect = "input_lag"
-    side: ClassVar[Side] = "input"
-    stands_for = "a first-order lag of the pressure, before the core"
-    params = (
-        BlockParam(
-            "time_constant_s", "s", 0.002, 0.5, 0.03, "lag of muscle behind valve", 1e3, "ms"
-        ),
-    )
+    def inverse(self, rate_hz: float, values: Sequence[float]) -> Inverse:
+        """The bend before the lag that gives the bend wanted now (exact, causal)."""
+        return LagMixInverse(rate_hz, (values[0],), 1.0)
 
 
 class SlowFill(Block):

@@ -29,15 +29,6 @@ REFERENCE_GAUGE_BAR: Final = 1.5
 """Gauge pressure at which the time constants and flow limits hold [bar] (rigs quote 1.5 bar)."""
 AMBIENT_BAR: Final = float(pa_to_bar(AMBIENT_PRESSURE_PA))
 """The atmosphere the gauge pressures are measured against [bar] (a float: numba freezes it)."""
-COMMAND_REACH_BAR: Final = 100.0
-"""How far above the muscle's pressure the inverse looks for a filling command [bar]."""
-SATURATED_SHARE: Final = 0.95
-"""Where a smooth flow limit is approached only asymptotically, the inverse asks for at most
-this share of it a sample: the rest would take an unbounded command."""
-
-LagTerms = tuple[float, float, float, float, float, float, float]
-"""Filling's and venting's time constants [s], their largest steps a sample [bar], the
-pressure exponent, the flow's linear share and the upstream exponent."""
 
 
 @njit(cache=True)
@@ -51,72 +42,35 @@ def _speed(p: float, exponent: float) -> float:
 
 @njit(cache=True)
 def _gain_and_limit(
-    p: float, x: float, rising: bool, dt_s: float, terms: LagTerms
+    p: float, rising: bool, dt_s: float, terms: tuple[float, float, float, float, float]
 ) -> tuple[float, float]:
-    """A sample's share of the error it closes and its largest step [bar].
+    """A sample's share of the error it closes and its largest step [bar], from ``p``.
 
-    The share depends on the muscle's pressure ``p`` now and the direction only. The limit
-    also grows with the absolute pressure upstream of the tube when ``upstream_exponent`` is
-    not 0: the valve's ``x`` when filling (a higher supply drives more air through the
-    tube), the muscle's when venting (it drives the air out).
+    Both depend on the muscle's pressure now and the direction only, never on this sample's
+    command, so a sample's step is linear in the command below the limit: the inverse is
+    exact (:class:`_LagInverse`).
     """
-    fill_s, vent_s, fill_step, vent_step, exponent, _, upstream_exponent = terms
+    fill_s, vent_s, fill_step, vent_step, exponent = terms
     speed = _speed(p, exponent)
     if rising:
-        gain, limit = 1.0 - math.exp(-speed * dt_s / fill_s), speed * fill_step
-    else:
-        gain, limit = 1.0 - math.exp(-speed * dt_s / vent_s), speed * vent_step
-    if upstream_exponent != 0.0:
-        limit *= _speed(x if rising else p, upstream_exponent)
-    return gain, limit
+        return 1.0 - math.exp(-speed * dt_s / fill_s), speed * fill_step
+    return 1.0 - math.exp(-speed * dt_s / vent_s), speed * vent_step
 
 
 @njit(cache=True)
-def _saturated(step: float, limit: float, linear_share: float) -> float:
-    """The step a flow limit lets through: linear up to its knee, then bending to the limit.
-
-    ``linear_share`` 1 is a hard limit (an orifice choked at once); below 1 the step is
-    linear up to ``linear_share * limit`` and approaches the limit along a tanh above it,
-    with the slope continuous at the knee (the flow through a restriction grows ever more
-    slowly with the pressure drop before it chokes). At 0 it is ``limit * tanh(step /
-    limit)``, a plain form of its own, as 1 is.
-    """
-    size = abs(step)
-    knee = linear_share * limit
-    if linear_share >= 1.0 or size <= knee:
-        return min(max(step, -limit), limit)
-    span = limit - knee
-    return math.copysign(knee + span * math.tanh((size - knee) / span), step)
-
-
-@njit(cache=True)
-def _unsaturated(step: float, limit: float, linear_share: float) -> float:
-    """The unlimited step that :func:`_saturated` turns into ``step`` (or the most it can).
-
-    A hard limit passes at most the limit; a smooth one at most
-    :data:`SATURATED_SHARE` of the way from the knee to it.
-    """
-    size = abs(step)
-    knee = linear_share * limit
-    if linear_share >= 1.0:
-        return min(max(step, -limit), limit)
-    if size <= knee:
-        return step
-    span = limit - knee
-    share = min((size - knee) / span, SATURATED_SHARE)
-    return math.copysign(knee + span * math.atanh(share), step)
-
-
-@njit(cache=True)
-def _lag_step(x: float, p: float, dt_s: float, terms: LagTerms) -> float:
+def _lag_step(
+    x: float, p: float, dt_s: float, terms: tuple[float, float, float, float, float]
+) -> float:
     """The muscle's next pressure [bar] from ``p`` with the valve at ``x``."""
     err = x - p
-    gain, limit = _gain_and_limit(p, x, err >= 0.0, dt_s, terms)
-    return p + _saturated(err * gain, limit, terms[5])
+    gain, limit = _gain_and_limit(p, err >= 0.0, dt_s, terms)
+    return p + min(max(err * gain, -limit), limit)
 
 
 @njit(cache=True)
-def _fill_vent_kernel(x: FloatArray, dt_s: float, terms: LagTerms) -> FloatArray:
+def _fill_vent_kernel(
+    x: FloatArray, dt_s: float, terms: tuple[float, float, float, float, float]
+) -> FloatArray:
     """The lag over a signal, from rest at its first sample."""
     out = np.empty_like(x)
     p = x[0]
@@ -137,18 +91,12 @@ class PneumaticLag(Block):
     volume changes as it pulls, so how quickly it all happens depends on the pressure:
     a power law in the absolute pressure, ``pressure_exponent`` (0: none; ideal gas through
     a laminar restriction is near 1; a muscle whose volume grows as it fills, below 0).
-    A restriction does not choke at once: ``flow_linear_share`` below 1 bends the flow
-    smoothly from linear to the limit. And the air that can pass grows with the pressure
-    upstream of the tube, the valve's when filling and the muscle's when venting:
-    ``upstream_exponent``.
 
-    The family is defined by these signatures, not by any one plant's flow equation. The lag
-    stays invertible a sample at a time: the speed depends on the muscle's pressure now and
-    the direction, so below the limit a sample's step is linear in the command and its
-    inverse is closed-form; with an upstream exponent the limit grows with the command, and
-    the inverse solves for it (:class:`_LagInverse`). ``vent_ratio`` = ``vent_rate_ratio`` =
-    ``flow_linear_share`` = 1, ``max_rate_pa_per_s`` at its top (no limit a step of the full
-    range reaches) and both exponents 0 are the plain lag, the block's first form.
+    The family is defined by these signatures, not by any one plant's flow equation: the
+    speed depends on the muscle's pressure now and the direction, never on the command, so
+    that the lag stays exactly invertible a sample at a time. ``vent_ratio`` =
+    ``vent_rate_ratio`` = 1, ``max_rate_pa_per_s`` at its top (no limit a step of the full
+    range reaches) and ``pressure_exponent`` = 0 are the plain lag, the block's first form.
     """
 
     effect = "pneumatic_lag"
@@ -205,40 +153,13 @@ class PneumaticLag(Block):
         BlockParam(
             "pressure_exponent",
             "1",
-            -2.0,
+            -1.0,
             2.0,
             0.0,
             "how much faster the muscle fills and vents at a higher absolute pressure "
             "(speed ~ p_abs ** exponent)",
-            # Below -1 since a muscle whose volume grows steeply fills ever slower; the grid
-            # stays the one validated over -1..2.
-            grid=(-1.0, 0.5, 2.0),
+            grid_points=3,
             absent=0.0,
-        ),
-        # The last two refine a flow limit the search has already found; a grid over them
-        # would multiply every diagnosis's cost, so only the polish moves them.
-        BlockParam(
-            "flow_linear_share",
-            "1",
-            0.0,
-            1.0,
-            1.0,
-            "share of the flow limit up to which the flow is linear in the pressure drop "
-            "(1: a hard limit)",
-            display_unit="x",
-            absent=1.0,
-            searched=False,
-        ),
-        BlockParam(
-            "upstream_exponent",
-            "1",
-            0.0,
-            4.0,
-            0.0,
-            "how the flow limit grows with the absolute pressure upstream of the tube "
-            "(the valve's when filling, the muscle's when venting)",
-            absent=0.0,
-            searched=False,
         ),
     )
     primary = "time_constant_s"
@@ -247,7 +168,6 @@ class PneumaticLag(Block):
     # Before a hysteresis a lag shifts each reversal; after it, it rounds the reversal's
     # corner. Both remove much of the same error, so only the better fit tells the side.
     rival = "output_lag"
-    side_form = "input_lag"
 
     def unlike_effect(self, values: Sequence[float]) -> list[str]:
         """A lag shorter than :data:`SHORTEST_TUBE_S` both ways is the valve's own response."""
@@ -256,20 +176,25 @@ class PneumaticLag(Block):
         return _valve_sized(max(values[0], values[0] * values[1]), "lag", "tube and muscle fill")
 
     @staticmethod
-    def _terms(rate_hz: float, values: Sequence[float]) -> tuple[float, LagTerms]:
-        """The sample period [s] and the lag's terms (:data:`LagTerms`) at the reference."""
-        fill_s, vent_ratio, max_rate_pa_per_s, vent_rate_ratio, exponent, share, upstream = values
+    def _terms(
+        rate_hz: float, values: Sequence[float]
+    ) -> tuple[float, tuple[float, float, float, float, float]]:
+        """The sample period [s] and the lag's terms at the reference pressure.
+
+        The terms: filling's and venting's time constants [s], their largest steps a sample
+        [bar], and the pressure exponent.
+        """
+        fill_s, vent_ratio, max_rate_pa_per_s, vent_rate_ratio, exponent = values
         dt_s = 1.0 / rate_hz
         fill_step = float(pa_to_bar(max_rate_pa_per_s)) * dt_s
-        vent_step = fill_step * vent_rate_ratio
-        return dt_s, (fill_s, fill_s * vent_ratio, fill_step, vent_step, exponent, share, upstream)
+        return dt_s, (fill_s, fill_s * vent_ratio, fill_step, fill_step * vent_rate_ratio, exponent)
 
     def apply(self, x: FloatArray, rate_hz: float, values: Sequence[float]) -> FloatArray:
         """The muscle's pressure [bar]: the valve's through the lag."""
         dt_s, terms = self._terms(rate_hz, values)
-        fill_s, vent_s, fill_step, vent_step, exponent, share, upstream = terms
+        fill_s, vent_s, fill_step, vent_step, exponent = terms
         unlimited = min(fill_step, vent_step) * rate_hz >= PLAIN_LAG_RATE_BAR_PER_S
-        if fill_s == vent_s and exponent == 0.0 and unlimited and share >= 1.0 and upstream == 0:
+        if fill_s == vent_s and exponent == 0.0 and unlimited:
             return _lowpass1(x, rate_hz, fill_s)  # the plain lag: exact and vectorised
         return _fill_vent_kernel(np.ascontiguousarray(x, dtype=float), dt_s, terms)
 
@@ -295,22 +220,19 @@ class PneumaticLag(Block):
 class _LagInverse(Inverse):
     """:meth:`PneumaticLag.streamer` backwards: exact, one sample a tick, no preview.
 
-    A sample's step ``a (u - p)`` is linear in the command ``u`` below the flow's knee
-    (``a`` depends on the muscle's pressure now and the direction, not on ``u``), so
-    ``u = p + (want - p) / a`` gives the pressure wanted now, and above the knee the
-    saturation is undone in closed form. Where the step is beyond the valve's flow limit the
-    command asks for the limit's step only (the least overdrive that gets there as fast; a
-    smooth limit's :data:`SATURATED_SHARE`), and the compensator's clamp bounds the rest: a
-    step in the plan becomes the valve fully open for as long as filling takes, then the
-    set-point, never an unbounded spike. When filling with an upstream exponent the limit
-    grows with the command itself, so the command is found by bisection. The state follows
-    the command really sent (:meth:`take`), so after a clamp the next sample asks for what
-    is still missing.
+    A sample's step ``a (u - p)`` is linear in the command ``u`` (``a`` and the flow limit
+    depend on the muscle's pressure now and the direction, not on ``u``), so
+    ``u = p + (want - p) / a`` gives the pressure wanted now. Where that step is beyond the
+    valve's flow limit the command asks for the limit's step only (the least overdrive that
+    gets there as fast), and the compensator's clamp bounds the rest: a step in the plan
+    becomes the valve fully open for as long as filling takes, then the set-point, never an
+    unbounded spike. The state follows the command really sent (:meth:`take`), so after a
+    clamp the next sample asks for what is still missing.
     """
 
     fills = True
 
-    def __init__(self, dt_s: float, terms: LagTerms) -> None:
+    def __init__(self, dt_s: float, terms: tuple[float, float, float, float, float]) -> None:
         self._dt_s = dt_s
         self._terms = terms
         self._p: float | None = None
@@ -320,12 +242,8 @@ class _LagInverse(Inverse):
         p = self._p
         if p is None:
             return target
-        rising = target >= p
-        gain, limit = _gain_and_limit(p, target, rising, self._dt_s, self._terms)
-        share = self._terms[5]
-        if not rising or self._terms[6] == 0.0:  # the limit does not move with the command
-            return p + _unsaturated(target - p, limit, share) / gain
-        return _command_for(p, target, gain, self._dt_s, self._terms)
+        gain, limit = _gain_and_limit(p, target >= p, self._dt_s, self._terms)
+        return p + min(max(target - p, -limit), limit) / gain
 
     def take(self, value: float) -> float:
         """The muscle's pressure after the command ``value``."""
@@ -334,39 +252,3 @@ class _LagInverse(Inverse):
             return value
         self._p = _lag_step(value, self._p, self._dt_s, self._terms)
         return self._p
-
-
-@njit(cache=True)
-def _command_for(p: float, target: float, gain: float, dt_s: float, terms: LagTerms) -> float:
-    """The filling command whose step reaches ``target`` when the limit grows with it.
-
-    The step grows monotonically with the command (through the linear part and through the
-    limit), so bisection finds it. It is never less than the unlimited lag's command; the
-    upper end doubles until the step reaches ``target`` or the command is
-    :data:`COMMAND_REACH_BAR` beyond the muscle, far past any valve's range, where the
-    compensator's clamp takes over.
-    """
-    low = p + (target - p) / gain
-    span = max(target - p, 1e-9) / gain
-    if _short_by(low, p, target, dt_s, terms) <= 0.0:
-        return low
-    high = low + span
-    while _short_by(high, p, target, dt_s, terms) > 0.0:
-        if high - p > COMMAND_REACH_BAR:
-            return high
-        span *= 2.0
-        high = low + span
-    for _ in range(60):
-        mid = 0.5 * (low + high)
-        if _short_by(mid, p, target, dt_s, terms) > 0.0:
-            low = mid
-        else:
-            high = mid
-    return high
-
-
-@njit(cache=True)
-def _short_by(u: float, p: float, target: float, dt_s: float, terms: LagTerms) -> float:
-    """How far below ``target`` [bar] the filling command ``u`` leaves the muscle."""
-    gain, limit = _gain_and_limit(p, u, True, dt_s, terms)
-    return target - p - _saturated((u - p) * gain, limit, terms[5])
