@@ -78,9 +78,9 @@ def test_a_directory_made_on_another_plant_is_refused(tmp_path: Path) -> None:
         _job(tmp_path, plant="my_lab.rod:make_plant")
 
 
-def _tuned(job: cm.Commission, **loop: float) -> Path:
+def _tuned(job: cm.Commission, *, decision: dict[str, object] | None = None, **loop: float) -> Path:
     """A sealed feedback.json in the job's tune directory, with ``loop`` identified."""
-    return sealed_gains(job.tune_dir, **loop)
+    return sealed_gains(job.tune_dir, decision=decision, **loop)
 
 
 def _fake_runs(job: cm.Commission, rmse: dict[str, list[float]]) -> None:
@@ -264,6 +264,12 @@ def test_the_dead_time_comes_from_the_explained_chain_where_the_lab_found_one(
     shutil.copytree(SUPPORT_DIR / "foreign_plants" / "boucwen_delay_chain", explained / "step2")
     assert job.chain_dead_time_s() == pytest.approx(0.0506, abs=1e-4)
     assert job.dead_time() == (pytest.approx(0.052), "the lab's explained chain")
+    # Where the tuner found the chain's shape does not fit the recorded steps (a delay put
+    # where the catheter has a lag), the steps' dead time and lag are read ahead instead.
+    _tuned(job, decision={"chain_fits_steps": False}, delay_s=0.0074, time_constant_s=0.0961)
+    seconds, source = job.dead_time()
+    assert seconds == pytest.approx(0.104)
+    assert source.startswith("the tuned loop") and "does not fit the recorded steps" in source
 
 
 def test_the_explained_chain_becomes_the_greybox_candidate(tmp_path: Path) -> None:

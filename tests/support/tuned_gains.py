@@ -12,13 +12,18 @@ from catheter_control.models import shipped_model_dir
 from catheter_models.feedback import GAINS_FILE, FeedbackGains
 
 
-def sealed_gains(directory: Path, **loop: float) -> Path:
-    """``directory``/feedback.json, sealed, with ``loop`` in its tuning's identified loop."""
+def sealed_gains(
+    directory: Path, *, decision: dict[str, object] | None = None, **loop: float
+) -> Path:
+    """``directory``/feedback.json, sealed, with ``loop`` in its tuning's identified loop.
+
+    ``decision``: keys of the tuning's own record (``shape_from``, ``chain_fits_steps``)."""
     shipped = FeedbackGains.load(shipped_model_dir("feedback") / GAINS_FILE)
     tuning = copy.deepcopy(shipped.tuning)
     unknown = set(loop) - set(tuning["loop"])
     if unknown:
         raise KeyError(f"the tuned loop has no {sorted(unknown)}")
     tuning["loop"].update(loop)
+    tuning.update(decision or {})
     directory.mkdir(parents=True, exist_ok=True)
     return dataclasses.replace(shipped, tuning=tuning).save(directory)

@@ -147,10 +147,14 @@ class Commission:
         Read through :meth:`FeedbackGains.load`, as the compensator node reads it, so a file
         whose seal does not match is refused here too, by name, not used.
         """
+        return dict(self.tuning().get("loop", {}))
+
+    def tuning(self) -> dict[str, Any]:
+        """What ``catheter-lab tune`` recorded of its decision ({} before tuning)."""
         path = self.tune_dir / "feedback.json"
         if not path.exists():
             return {}
-        return dict(FeedbackGains.load(path).tuning.get("loop", {}))
+        return dict(FeedbackGains.load(path).tuning)
 
     def tip_mode_hz(self) -> float:
         """The ringing tip the tuned loop has [Hz] (0: none found, or not tuned yet)."""
@@ -401,18 +405,25 @@ class Commission:
     def dead_time(self) -> tuple[float, str]:
         """The dead time the compensators read ahead [s], whole control samples, and its source.
 
-        The lab's explained chain where it found a delay or a lag, else the tuned loop. The
-        chain is fitted on the whole recording with the hysteresis in it; the tuner's linear
-        step fit read 30-33 ms where the chain read 50.6 ms on a plant with 40 ms of delay
-        behind an 8 ms valve (tracking 0.50 / 0.23 / 0.66 / 0.42 deg against 0.37 / 0.23 /
-        0.40 / 0.40 deg offline).
+        The lab's explained chain where it found a delay or a lag and the tuner found its
+        shape fits the recorded steps (``chain_fits_steps`` in ``feedback.json``), else the
+        tuned loop. The chain is fitted on the whole recording with the hysteresis in it;
+        the tuner's linear step fit read 30-33 ms where the chain read 50.6 ms on a plant
+        with 40 ms of delay behind an 8 ms valve (tracking 0.50 / 0.23 / 0.66 / 0.42 deg
+        against 0.37 / 0.23 / 0.40 / 0.40 deg offline).
         """
         chain = self.chain_dead_time_s()
-        seconds, source = (
-            (chain, "the lab's explained chain")
-            if chain is not None
-            else (self.tuned_dead_time_s(), "the tuned loop")
-        )
+        if chain is not None and self.tuning().get("chain_fits_steps") is False:
+            # The tuner found the chain's shape does not fit the recorded steps (a delay
+            # where the catheter has a lag): its dead time is not the loop's either.
+            seconds, source = (
+                self.tuned_dead_time_s(),
+                "the tuned loop: the explained chain's shape does not fit the recorded steps",
+            )
+        elif chain is not None:
+            seconds, source = chain, "the lab's explained chain"
+        else:
+            seconds, source = self.tuned_dead_time_s(), "the tuned loop"
         from catheter_models.models.idrdpi import MAX_PREVIEW_S
 
         if seconds > MAX_PREVIEW_S:

@@ -11,7 +11,7 @@ from foreign_plants import PLANTS
 from foreign_plants.cases import draw_case
 
 from catheter_models.feedback.chain_loop import chain_shape, design_on_chain, loop_from_chain
-from catheter_models.feedback.tune import margins, plainly_stable
+from catheter_models.feedback.tune import design, margins, plainly_stable
 from catheter_models.models.cores import make_core
 from catheter_models.models.greybox import GreyBox
 
@@ -54,6 +54,26 @@ def test_a_chain_that_agrees_with_the_steps_shapes_the_loop(delayed_case) -> Non
     # The gains were checked on the steps' own loop too.
     assert plainly_stable(tuned.steps_loop, tuned.gains)
     assert tuned.record()["shape_from"] == "chain"
+    assert tuned.chain_fits_steps and tuned.record()["chain_fits_steps"] is True
+
+
+def test_a_chain_with_a_delay_where_the_catheter_has_a_lag_does_not_shape_the_loop() -> None:
+    # The lab may take a tube's lag up as a transport delay (it did on the Maxwell-slip plant
+    # with a lag, commissioned live); the steps show a lag, and the chain's shape misses them.
+    case = draw_case(PLANTS["maxwell_slip"], ["pneumatic_lag"], 1)
+    lag_s = case.effects[0].params["time_constant_s"]
+    wrong = chain({"transport_delay": [3.0 * lag_s]})
+    tuned = design_on_chain([case.train], wrong)
+    assert not tuned.chain_fits_steps
+    assert [d for d in tuned.disagreements if d.startswith("fit: ")], tuned.disagreements
+    assert tuned.shape_from == "steps" and tuned.model == tuned.steps_loop
+    assert tuned.steps_loop.time_constant_s == pytest.approx(lag_s, rel=0.3)
+    assert tuned.record()["chain_fits_steps"] is False
+    # Stability alone would have let the chain shape it: its gains are stable on the steps'
+    # loop, only slower than the loop allows.
+    gains, _ = design(loop_from_chain([case.train], wrong), 1.6, 0.0)
+    assert plainly_stable(tuned.steps_loop, gains)
+    assert gains.ki_pa_per_rad_s < tuned.gains.ki_pa_per_rad_s
 
 
 def test_a_chain_missing_the_delay_is_said_and_not_trusted(delayed_case) -> None:

@@ -15,8 +15,13 @@ and only each step's gain from the steps (a PAM catheter's local gain changes al
 curve; the loop is designed for :data:`~catheter_models.feedback.tune.GAIN_PERCENTILE` of
 them, as before). :func:`disagreements` says where the chain and the steps' own fit differ,
 in words a person can act on; the tuner designs on the chain's shape and checks the gains on
-the steps' loop too, falling back to the steps' loop where the chain's would not be stable
-on it (a chain that misses a delay the steps show).
+the steps' loop too. It designs on the steps' loop instead where the chain's gains would not
+be stable on it (a chain that misses a delay the steps show), and where the chain's shape
+does not fit the steps (:func:`fits_steps`): a delay the lab put where the catheter has a
+lag (the ``maxwell_slip_lag`` plant of tests/support, commissioned 2026-11-28: a 118 ms
+delay where the steps show 7 ms and a 96 ms lag, 11.7 % of the steps unexplained against
+their own fit's 4.3 %) gave a PI with a 0.8 Hz crossover where the steps' loop allows
+5 Hz, and tracking of 0.46-0.82 deg where the steps' gains replay at 0.12-0.31 deg.
 """
 
 from __future__ import annotations
@@ -52,9 +57,16 @@ TIME_SHARE = 0.3
 """... and by more than this share of the larger."""
 FREQUENCY_SHARE = 0.15
 """A tip's frequency differs when apart by more than this share."""
-RESIDUAL_FACTOR = 1.5
+RESIDUAL_FACTOR = 2.0
 """The chain's shape fits the steps worse when its residual exceeds the steps' own by this
-factor (plus 0.05)."""
+factor (plus :data:`RESIDUAL_ALLOWANCE`). The steps' fit has a dead time, a lag and a tip
+free, the chain's only the gains, so it fits a little worse where it is right: 4.5 % against
+2.9 % on the ``maxwell_slip_delay`` plant (its 20 ms delay right, the steps' own fit adding
+a 12 Hz tip the catheter does not have); where it is wrong, 11.7 % against 4.3 % (a 118 ms
+delay for a 96 ms lag, ``maxwell_slip_lag``). Both commissioned 2026-11-28 (tests/support)."""
+RESIDUAL_ALLOWANCE = 0.01
+"""What the chain's residual may exceed the steps' own by beyond :data:`RESIDUAL_FACTOR`,
+for steps fitted to a per cent or less (noise alone leaves that)."""
 
 
 @dataclass(frozen=True)
@@ -114,6 +126,15 @@ def loop_from_chain(recordings: Sequence[Recording], chain: GreyBox) -> LoopMode
     return loop_of_shape(np.asarray(theta), ks, nrmse, recordings, rate, resonance=resonance)
 
 
+def fits_steps(from_chain: LoopModel, from_steps: LoopModel) -> bool:
+    """Whether the chain's shape explains the recorded steps about as well as their own fit.
+
+    The chain's residual on the steps may exceed the steps' own by :data:`RESIDUAL_FACTOR`
+    (plus :data:`RESIDUAL_ALLOWANCE`).
+    """
+    return from_chain.fit_nrmse <= RESIDUAL_FACTOR * from_steps.fit_nrmse + RESIDUAL_ALLOWANCE
+
+
 def _times_differ(a_s: float, b_s: float) -> bool:
     return abs(a_s - b_s) > max(TIME_TOLERANCE_S, TIME_SHARE * max(a_s, b_s))
 
@@ -142,7 +163,7 @@ def disagreements(from_chain: LoopModel, from_steps: LoopModel) -> list[str]:
         out.append(f"tip: {has} ring at {max(tip_a, tip_b):.2f} Hz, {lacks} do not")
     elif tip_a > 0.0 and abs(tip_a - tip_b) > FREQUENCY_SHARE * max(tip_a, tip_b):
         out.append(f"tip: the chain rings at {tip_a:.2f} Hz, the recorded steps at {tip_b:.2f} Hz")
-    if from_chain.fit_nrmse > RESIDUAL_FACTOR * from_steps.fit_nrmse + 0.05:
+    if not fits_steps(from_chain, from_steps):
         out.append(
             f"fit: the chain's shape leaves {from_chain.fit_nrmse:.1%} of the steps' response "
             f"unexplained, their own fit {from_steps.fit_nrmse:.1%}"
@@ -167,12 +188,18 @@ class ChainTuning:
     chain_loop: LoopModel
     disagreements: list[str]
     shape_from: str
-    """'chain' or 'steps' (the chain's gains were not stable enough on the steps' loop)."""
+    """'chain' or 'steps' (the chain's shape does not fit the steps, or its gains were not
+    stable enough on the steps' loop)."""
+    chain_fits_steps: bool
+    """Whether the chain's shape explains the recorded steps (:func:`fits_steps`); where it
+    does not, its dead time is not the loop's either (commission reads the plan ahead by the
+    steps' instead)."""
 
     def record(self) -> dict[str, object]:
         """The decision, as ``feedback.json``'s tuning keeps it."""
         return {
             "shape_from": self.shape_from,
+            "chain_fits_steps": self.chain_fits_steps,
             "chain_loop": self.chain_loop.describe(),
             "steps_loop": self.steps_loop.describe(),
             "disagreements": list(self.disagreements),
@@ -194,15 +221,25 @@ def design_on_chain(
     steps_loop = identify(recordings)
     chain_loop = loop_from_chain(recordings, chain)
     said = disagreements(chain_loop, steps_loop)
-    gains, found = design(chain_loop, max_sensitivity, opening_pressure_pa)
-    on_steps = margins(steps_loop, gains)
-    if plainly_stable(steps_loop, gains) and (
-        on_steps.max_sensitivity <= CHECK_SENSITIVITY_FACTOR * max_sensitivity
-    ):
-        return ChainTuning(chain_loop, gains, found, steps_loop, chain_loop, said, "chain")
-    said.append(
-        f"the gains designed on the chain's loop would run the steps' loop at "
-        f"{on_steps.describe()}: designed on the steps' loop instead"
-    )
+    fits = fits_steps(chain_loop, steps_loop)
+    if fits:
+        gains, found = design(chain_loop, max_sensitivity, opening_pressure_pa)
+        on_steps = margins(steps_loop, gains)
+        if plainly_stable(steps_loop, gains) and (
+            on_steps.max_sensitivity <= CHECK_SENSITIVITY_FACTOR * max_sensitivity
+        ):
+            return ChainTuning(
+                chain_loop, gains, found, steps_loop, chain_loop, said, "chain", fits
+            )
+        said.append(
+            f"the gains designed on the chain's loop would run the steps' loop at "
+            f"{on_steps.describe()}: designed on the steps' loop instead"
+        )
+    else:
+        said.append(
+            "the chain's shape does not fit the recorded steps: designed on the steps' loop, "
+            "and its dead time is not read ahead (the lab's chain is wrong about the loop's "
+            "dynamics; see the disagreements above)"
+        )
     gains, found = design(steps_loop, max_sensitivity, opening_pressure_pa)
-    return ChainTuning(steps_loop, gains, found, steps_loop, chain_loop, said, "steps")
+    return ChainTuning(steps_loop, gains, found, steps_loop, chain_loop, said, "steps", fits)
