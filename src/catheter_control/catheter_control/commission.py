@@ -99,6 +99,11 @@ LEAD_IN_S = 1.0
 """As follow_trajectory: a trajectory that does not start straight is approached from rest."""
 
 
+def _dead_time_of(loop: dict[str, Any]) -> float:
+    """A tuned loop's dead time plus lag [s] (0 for a loop not identified)."""
+    return float(loop.get("delay_s", 0.0)) + float(loop.get("time_constant_s", 0.0))
+
+
 @dataclass
 class Commission:
     """One commissioning: its directory, its rig, its settings, and the state of its steps."""
@@ -368,8 +373,7 @@ class Commission:
         A first-order lag is, to first order, a dead time of its time constant, so the two
         are read ahead together.
         """
-        loop = self.tuned_loop()
-        return float(loop.get("delay_s", 0.0)) + float(loop.get("time_constant_s", 0.0))
+        return _dead_time_of(self.tuned_loop())
 
     def explained_dir(self) -> Path | None:
         """The lab's last version of the explained chain.
@@ -413,17 +417,19 @@ class Commission:
         against 0.37 / 0.23 / 0.40 / 0.40 deg offline).
         """
         chain = self.chain_dead_time_s()
-        if chain is not None and self.tuning().get("chain_fits_steps") is False:
+        tuning = self.tuning()  # one read of the sealed file for both branches
+        tuned_s = _dead_time_of(tuning.get("loop", {}))
+        if chain is not None and tuning.get("chain_fits_steps") is False:
             # The tuner found the chain's shape does not fit the recorded steps (a delay
             # where the catheter has a lag): its dead time is not the loop's either.
             seconds, source = (
-                self.tuned_dead_time_s(),
+                tuned_s,
                 "the tuned loop: the explained chain's shape does not fit the recorded steps",
             )
         elif chain is not None:
             seconds, source = chain, "the lab's explained chain"
         else:
-            seconds, source = self.tuned_dead_time_s(), "the tuned loop"
+            seconds, source = tuned_s, "the tuned loop"
         from catheter_models.models.idrdpi import MAX_PREVIEW_S
 
         if seconds > MAX_PREVIEW_S:
