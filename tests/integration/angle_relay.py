@@ -8,12 +8,24 @@ real time like the driver it stands for: relayed from the pytest process, which 
 thousand messages a second at normal priority, the stream stalled for over 100 ms often
 enough that the compensator (rightly) stopped before the fault was injected.
 
+It speaks DDS over UDP only, not Fast DDS's shared memory. A process stopped with SIGSTOP
+cannot pop its shared-memory port; after Fast DDS's health-check timeout a writer marks the
+port as broken and rebuilds it, and the relay, resumed, must find the new one. Once in a
+clean-clone CI run (stop 43) it did not: 13.6 s after SIGCONT the compensator still had no
+tip angle, the relay's log empty. Over UDP a stopped reader only lets its socket buffer
+overflow, and the reliable protocol resumes. What the tests prove is the compensator's
+handling of a silent laser, which is the same on either transport.
+
     python tests/integration/angle_relay.py --ros-args -r __ns:=/catheter
 """
 
 from __future__ import annotations
 
+import os
 import signal
+
+# Before rclpy: Fast DDS reads its transports when the participant is made (see above).
+os.environ["FASTDDS_BUILTIN_TRANSPORTS"] = "UDPv4"
 
 from rclpy.node import Node
 from sensor_msgs.msg import JointState

@@ -45,6 +45,9 @@ from catheter_models.contract import (
 from catheter_ros import qos
 from catheter_ros.qos import RECORD
 
+LASER_BACK_TIMEOUT_S = 15.0
+"""How long a resumed stand-in laser may take to publish again (0.04-0.06 s when idle)."""
+
 pytestmark = [
     pytest.mark.slow,
     # lark (imported by the ROS message tooling) still uses sre_parse; not ours.
@@ -193,6 +196,7 @@ def test_tip_angle_stopping_ramps_the_pressure_down_and_says_why(
         desired = probe.subscribe(JointState, ANGLE_DESIRED.name, RECORD)
         measured = probe.subscribe(FluidPressure, PRESSURE_MEASURED.name, RECORD)
         diags = probe.subscribe(DiagnosticArray, DIAGNOSTICS.name, 10)
+        angles = probe.subscribe(JointState, TIP_ANGLE.name, RECORD)
         pub = probe.node.create_publisher(JointTrajectory, TRAJECTORY.name, qos.TRAJECTORY)
         _wait_ready(probe, pub, diags, children)
 
@@ -273,9 +277,19 @@ def test_tip_angle_stopping_ramps_the_pressure_down_and_says_why(
         assert refused, [diagnostic_values(s) for s in statuses(diags, COMPENSATOR)[-1:]]
         assert len(commands) == n_cmd, "commands without the laser"
 
-        # The laser is back: the next trajectory runs, from a clean compensator state.
+        # The laser is back: the next trajectory runs, from a clean compensator state. Back
+        # means its angles reach the graph again (the probe sees them), not a fixed time after
+        # SIGCONT: a resumed process first works through what queued while it was stopped.
         relay.send_signal(signal.SIGCONT)
-        probe.spin_for(0.3)
+        t_resumed = time.monotonic()
+        back = probe.spin_until(
+            lambda: sum(m.mono_s > t_resumed for m in angles) >= 25, LASER_BACK_TIMEOUT_S
+        )
+        assert back, (
+            f"the stand-in laser (angle_relay) published nothing for {LASER_BACK_TIMEOUT_S} s "
+            "after SIGCONT: the relay, not the compensator, failed",
+            children.all_logs(),
+        )
         n_diag = len(diags)
         _send(probe, pub, trajectory_msg([(0.0, 0.0), (1.0, 5.0), (2.0, 0.0)]))
         assert probe.spin_until(lambda: len(commands) > n_cmd + 250, 5.0)
