@@ -17,11 +17,13 @@ them, as before). :func:`disagreements` says where the chain and the steps' own 
 in words a person can act on; the tuner designs on the chain's shape and checks the gains on
 the steps' loop too. It designs on the steps' loop instead where the chain's gains would not
 be stable on it (a chain that misses a delay the steps show), and where the chain's shape
-does not fit the steps (:func:`fits_steps`): a delay the lab put where the catheter has a
-lag (the ``maxwell_slip_lag`` plant of tests/support, commissioned 2026-11-28: a 118 ms
-delay where the steps show 7 ms and a 96 ms lag, 11.7 % of the steps unexplained against
-their own fit's 4.3 %) gave a PI with a 0.8 Hz crossover where the steps' loop allows
-5 Hz, and tracking of 0.46-0.82 deg where the steps' gains replay at 0.12-0.31 deg.
+predicts the steps worse than their own shape predicts a step it was not fitted to
+(:func:`fits_steps`). On the ``maxwell_slip_lag`` plant of tests/support, commissioned
+2026-11-28, the lab put a 118 ms delay, and in another recording a 40 ms delay and an 86 ms
+lag, where the steps show 7 ms and a 96 ms lag: the chain's shapes left 11.7 and 7.3 % of
+the steps unexplained, the steps' own shape 5.4 % of each step left out of its fit. The
+chain's gains held the crossover at 0.8 and 1.6 Hz where the steps' loop allows 5 Hz, and
+the runs tracked at 0.46-0.82 and 0.31-0.52 deg.
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ from catheter_models.feedback.tune import (
     LoopModel,
     Margins,
     design,
+    held_out_nrmse,
     identify,
     loop_of_shape,
     margins,
@@ -57,16 +60,6 @@ TIME_SHARE = 0.3
 """... and by more than this share of the larger."""
 FREQUENCY_SHARE = 0.15
 """A tip's frequency differs when apart by more than this share."""
-RESIDUAL_FACTOR = 2.0
-"""The chain's shape fits the steps worse when its residual exceeds the steps' own by this
-factor (plus :data:`RESIDUAL_ALLOWANCE`). The steps' fit has a dead time, a lag and a tip
-free, the chain's only the gains, so it fits a little worse where it is right: 4.5 % against
-2.9 % on the ``maxwell_slip_delay`` plant (its 20 ms delay right, the steps' own fit adding
-a 12 Hz tip the catheter does not have); where it is wrong, 11.7 % against 4.3 % (a 118 ms
-delay for a 96 ms lag, ``maxwell_slip_lag``). Both commissioned 2026-11-28 (tests/support)."""
-RESIDUAL_ALLOWANCE = 0.01
-"""What the chain's residual may exceed the steps' own by beyond :data:`RESIDUAL_FACTOR`,
-for steps fitted to a per cent or less (noise alone leaves that)."""
 
 
 @dataclass(frozen=True)
@@ -126,21 +119,34 @@ def loop_from_chain(recordings: Sequence[Recording], chain: GreyBox) -> LoopMode
     return loop_of_shape(np.asarray(theta), ks, nrmse, recordings, rate, resonance=resonance)
 
 
-def fits_steps(from_chain: LoopModel, from_steps: LoopModel) -> bool:
-    """Whether the chain's shape explains the recorded steps about as well as their own fit.
+def fits_steps(from_chain: LoopModel, steps_held_out_nrmse: float) -> bool:
+    """Whether the chain's shape predicts the recorded steps as well as their own shape does.
 
-    The chain's residual on the steps may exceed the steps' own by :data:`RESIDUAL_FACTOR`
-    (plus :data:`RESIDUAL_ALLOWANCE`).
+    The chain was fitted to none of the steps, so it is held against the steps' shape judged
+    on steps it was not fitted to (:func:`~catheter_models.feedback.tune.held_out_nrmse`),
+    each step's gain free in both; against the steps' in-sample residual (their dead time, lag
+    and tip free) it would lose even where it is right. The plant's own hidden effect as the
+    chain (three plants of tests/support, delay, lag and tip, three cases each) predicted
+    the steps better in 15 of 27: the hidden effect alone is not the whole loop (the valve,
+    the plant's own dynamics). Where it lost, the steps' design also held Ms <= 1.6 on the
+    chain's loop. A delay and a longer lag where the plant has a lag alone (what the lab held
+    on ``maxwell_slip_lag``) lost on all six cases tried.
     """
-    return from_chain.fit_nrmse <= RESIDUAL_FACTOR * from_steps.fit_nrmse + RESIDUAL_ALLOWANCE
+    return from_chain.fit_nrmse <= steps_held_out_nrmse
 
 
 def _times_differ(a_s: float, b_s: float) -> bool:
     return abs(a_s - b_s) > max(TIME_TOLERANCE_S, TIME_SHARE * max(a_s, b_s))
 
 
-def disagreements(from_chain: LoopModel, from_steps: LoopModel) -> list[str]:
-    """Where the chain's loop and the steps' own fit differ, each said (empty: they agree)."""
+def disagreements(
+    from_chain: LoopModel, from_steps: LoopModel, steps_held_out_nrmse: float
+) -> list[str]:
+    """Where the chain's loop and the steps' own fit differ, each said (empty: they agree).
+
+    ``steps_held_out_nrmse``: the steps' shape on steps left out of its fit (see
+    :func:`fits_steps`).
+    """
     out = []
     for what, a, b in (
         ("dead time", from_chain.delay_s, from_steps.delay_s),
@@ -163,10 +169,11 @@ def disagreements(from_chain: LoopModel, from_steps: LoopModel) -> list[str]:
         out.append(f"tip: {has} ring at {max(tip_a, tip_b):.2f} Hz, {lacks} do not")
     elif tip_a > 0.0 and abs(tip_a - tip_b) > FREQUENCY_SHARE * max(tip_a, tip_b):
         out.append(f"tip: the chain rings at {tip_a:.2f} Hz, the recorded steps at {tip_b:.2f} Hz")
-    if not fits_steps(from_chain, from_steps):
+    if not fits_steps(from_chain, steps_held_out_nrmse):
         out.append(
             f"fit: the chain's shape leaves {from_chain.fit_nrmse:.1%} of the steps' response "
-            f"unexplained, their own fit {from_steps.fit_nrmse:.1%}"
+            f"unexplained, the steps' own shape {steps_held_out_nrmse:.1%} of each step left "
+            f"out of its fit ({from_steps.fit_nrmse:.1%} of the steps it was fitted to)"
         )
     return out
 
@@ -191,15 +198,19 @@ class ChainTuning:
     """'chain' or 'steps' (the chain's shape does not fit the steps, or its gains were not
     stable enough on the steps' loop)."""
     chain_fits_steps: bool
-    """Whether the chain's shape explains the recorded steps (:func:`fits_steps`); where it
+    """Whether the chain's shape predicts the recorded steps (:func:`fits_steps`); where it
     does not, its dead time is not the loop's either (commission reads the plan ahead by the
     steps' instead)."""
+    steps_held_out_nrmse: float
+    """The steps' own shape on each step left out of its fit: the bar the chain was held to."""
 
     def record(self) -> dict[str, object]:
         """The decision, as ``feedback.json``'s tuning keeps it."""
         return {
             "shape_from": self.shape_from,
             "chain_fits_steps": self.chain_fits_steps,
+            "chain_fit_nrmse": self.chain_loop.fit_nrmse,
+            "steps_held_out_nrmse": self.steps_held_out_nrmse,
             "chain_loop": self.chain_loop.describe(),
             "steps_loop": self.steps_loop.describe(),
             "disagreements": list(self.disagreements),
@@ -219,9 +230,10 @@ def design_on_chain(
         SignalError: too few steps, or no PI within the bound on the loop designed for.
     """
     steps_loop = identify(recordings)
+    held_out = held_out_nrmse(recordings, steps_loop)
     chain_loop = loop_from_chain(recordings, chain)
-    said = disagreements(chain_loop, steps_loop)
-    fits = fits_steps(chain_loop, steps_loop)
+    said = disagreements(chain_loop, steps_loop, held_out)
+    fits = fits_steps(chain_loop, held_out)
     if fits:
         gains, found = design(chain_loop, max_sensitivity, opening_pressure_pa)
         on_steps = margins(steps_loop, gains)
@@ -229,7 +241,7 @@ def design_on_chain(
             on_steps.max_sensitivity <= CHECK_SENSITIVITY_FACTOR * max_sensitivity
         ):
             return ChainTuning(
-                chain_loop, gains, found, steps_loop, chain_loop, said, "chain", fits
+                chain_loop, gains, found, steps_loop, chain_loop, said, "chain", fits, held_out
             )
         said.append(
             f"the gains designed on the chain's loop would run the steps' loop at "
@@ -242,4 +254,6 @@ def design_on_chain(
             "dynamics; see the disagreements above)"
         )
     gains, found = design(steps_loop, max_sensitivity, opening_pressure_pa)
-    return ChainTuning(steps_loop, gains, found, steps_loop, chain_loop, said, "steps", fits)
+    return ChainTuning(
+        steps_loop, gains, found, steps_loop, chain_loop, said, "steps", fits, held_out
+    )
