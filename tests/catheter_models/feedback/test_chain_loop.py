@@ -10,7 +10,12 @@ import pytest
 from foreign_plants import PLANTS
 from foreign_plants.cases import draw_case
 
-from catheter_models.feedback.chain_loop import chain_shape, design_on_chain, loop_from_chain
+from catheter_models.feedback.chain_loop import (
+    chain_shape,
+    design_on_chain,
+    fits_steps,
+    loop_from_chain,
+)
 from catheter_models.feedback.tune import design, margins, plainly_stable
 from catheter_models.models.cores import make_core
 from catheter_models.models.greybox import GreyBox
@@ -129,6 +134,15 @@ def test_a_delay_and_a_longer_lag_where_the_catheter_has_a_lag_does_not_shape_th
     assert not tuned.chain_fits_steps, (tuned.chain_loop.describe(), tuned.steps_held_out_nrmse)
     assert tuned.shape_from == "steps"
     assert [d for d in tuned.disagreements if d.startswith("fit: ")], tuned.disagreements
+
+
+def test_a_chain_of_the_steps_own_shape_fits_them_whatever_the_last_digit(delayed_case) -> None:
+    # Where both shapes sit at the fit's bounds (no delay, no lag) the chain's residual and
+    # the held-out one are the same number, computed two ways; it must not read as a misfit.
+    case, _ = delayed_case
+    loop = loop_from_chain([case.train], chain({}))
+    assert fits_steps(loop, loop.fit_nrmse * (1.0 - 1e-12))
+    assert not fits_steps(loop, loop.fit_nrmse * (1.0 - 1e-6))
 
 
 def test_a_chain_missing_the_delay_is_said_and_not_trusted(delayed_case) -> None:

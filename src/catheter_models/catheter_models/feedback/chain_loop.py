@@ -61,6 +61,12 @@ TIME_SHARE = 0.3
 FREQUENCY_SHARE = 0.15
 """A tip's frequency differs when apart by more than this share."""
 
+TIE_SHARE = 1e-9
+"""Residuals this close are one number computed two ways, and the chain keeps the loop: where
+the steps show no dead time or lag, their fit sits at its lower bounds, every step left out
+refits to the same shape, and the chain without a delay or lag has that shape too (our
+emulated rig, 2026-11-29: 5.596687997479 % against 5.596687997489 %)."""
+
 
 @dataclass(frozen=True)
 class ChainShape:
@@ -132,7 +138,7 @@ def fits_steps(from_chain: LoopModel, steps_held_out_nrmse: float) -> bool:
     chain's loop. A delay and a longer lag where the plant has a lag alone (what the lab held
     on ``maxwell_slip_lag``) lost on all six cases tried.
     """
-    return from_chain.fit_nrmse <= steps_held_out_nrmse
+    return from_chain.fit_nrmse <= steps_held_out_nrmse * (1.0 + TIE_SHARE)
 
 
 def _times_differ(a_s: float, b_s: float) -> bool:
