@@ -255,9 +255,9 @@ def design_on_chain(
         )
     else:
         said.append(
-            "the chain's shape does not fit the recorded steps: designed on the steps' loop, "
-            "and its dead time is not read ahead (the lab's chain is wrong about the loop's "
-            "dynamics; see the disagreements above)"
+            "the chain's shape predicts the recorded steps worse than their own shape does on "
+            "steps left out of its fit: designed on the steps' loop, and commission reads the "
+            "plan ahead by its dead time, not the chain's (see the disagreements above)"
         )
     gains, found = design(steps_loop, max_sensitivity, opening_pressure_pa)
     return ChainTuning(
