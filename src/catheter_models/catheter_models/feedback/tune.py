@@ -255,6 +255,11 @@ def _gains_and_residual(  # noqa: PLR0917 - the step rows and the shape, as _fit
     return ks, ((y - ks[:, None] * r) * mask).ravel()
 
 
+def _nrmse(squared_residual: float, y: FloatArray, mask: FloatArray) -> float:
+    """A residual's sum of squares, normalised by the steps' responses (their masked part)."""
+    return math.sqrt(squared_residual / max(float(np.sum((y * mask) ** 2)), 1e-300))
+
+
 def _fit(
     u: FloatArray, y: FloatArray, mask: FloatArray, dt_s: float, resonance: bool
 ) -> tuple[FloatArray, FloatArray, float]:
@@ -282,7 +287,7 @@ def _fit(
             best = (float(sol.cost), sol.x)
     assert best is not None
     ks, resid = gains_and_residual(best[1])
-    nrmse = float(np.sqrt(np.sum(resid**2) / max(np.sum((y * mask) ** 2), 1e-300)))
+    nrmse = _nrmse(float(np.sum(resid**2)), y, mask)
     return best[1], ks, nrmse
 
 
@@ -347,7 +352,7 @@ def shape_fit(
 ) -> tuple[FloatArray, float]:
     """Each step's gain and the normalised residual of the fixed shape ``theta`` (log values)."""
     ks, resid = _gains_and_residual(theta, u, y, mask, dt_s, resonance)
-    return ks, float(np.sqrt(np.sum(resid**2) / max(np.sum((y * mask) ** 2), 1e-300)))
+    return ks, _nrmse(float(np.sum(resid**2)), y, mask)
 
 
 def held_out_nrmse(recordings: Sequence[Recording], model: LoopModel) -> float:
@@ -376,7 +381,7 @@ def held_out_nrmse(recordings: Sequence[Recording], model: LoopModel) -> float:
             theta, u_rows[i : i + 1], y_rows[i : i + 1], mask[i : i + 1], dt, resonance
         )
         squared += float(np.sum(resid**2))
-    return math.sqrt(squared / max(float(np.sum((y_rows * mask) ** 2)), 1e-300))
+    return _nrmse(squared, y_rows, mask)
 
 
 def identify(recordings: Sequence[Recording]) -> LoopModel:
