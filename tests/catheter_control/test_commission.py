@@ -391,6 +391,13 @@ def _scored_follows(job: cm.Commission, rmse: dict[str, list[float]]) -> list[tu
     return ran
 
 
+def _chosen(job: cm.Commission) -> str:
+    """Select (every target met) and read back the compensator written as commissioned."""
+    assert job._select() == 0
+    path = job.out_dir / cm.MODEL_DIR / cm.COMMISSIONED_FILE
+    return str(json.loads(path.read_text())["compensator"])
+
+
 def _with_greybox(job: cm.Commission) -> None:
     _tuned(job, resonance_hz=0.0)
     for kind in ("greybox", "idrdpi"):
@@ -419,9 +426,7 @@ def test_a_candidate_that_can_no_longer_be_chosen_is_not_followed_further(
     assert "worse than greybox+pi's worst trajectory (0.170 deg)" in str(
         job.state.steps[skipped[0]].facts["skipped"]
     )
-    assert job._select() == 0
-    chosen = json.loads((job.out_dir / cm.MODEL_DIR / cm.COMMISSIONED_FILE).read_text())
-    assert chosen["compensator"] == "greybox"
+    assert _chosen(job) == "greybox"
     # A rerun asking for every run follows only what was skipped.
     again = _job(tmp_path)
     again.every_run = True
@@ -442,9 +447,7 @@ def test_the_candidate_that_tracks_the_first_trajectory_best_follows_the_rest_fi
     assert ran == [("greybox+pi", first), ("idrdpi+pi", first)] + [
         ("idrdpi+pi", t) for t in TEST_TRAJECTORIES[1:]
     ]
-    assert job._select() == 0
-    chosen = json.loads((job.out_dir / cm.MODEL_DIR / cm.COMMISSIONED_FILE).read_text())
-    assert chosen["compensator"] == "idrdpi"
+    assert _chosen(job) == "idrdpi"
     # Run again, the same order and nothing followed twice.
     assert _scored_follows(_job(tmp_path), rmse) == []
 
