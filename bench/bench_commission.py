@@ -160,6 +160,28 @@ def _steps(out: Path) -> dict[str, Any]:
     return dict(json.loads(state.read_text()).get("steps", {})) if state.exists() else {}
 
 
+def _commit() -> str:
+    """The checked-out commit, with ``+dirty`` for uncommitted changes ('' outside git)."""
+    try:
+        head = subprocess.run(
+            ["git", "rev-parse", "--short=12", "HEAD"],
+            cwd=REPO,
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            cwd=REPO,
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return ""
+    return head + ("+dirty" if dirty else "")
+
+
 def table(results: dict[str, dict[str, Any]]) -> str:
     """Plant by plant: time, chosen, RMSE per trajectory beside the by-hand path's."""
     short = {t: t.replace("traj_", "")[:10] for t in TRAJECTORIES}
@@ -196,8 +218,17 @@ def main() -> None:
     root = args.keep or Path(tempfile.mkdtemp(prefix="bench_commission-"))
     root.mkdir(parents=True, exist_ok=True)
     results: dict[str, dict[str, Any]] = {}
+    # The file is merged by plant over many runs: each row says which code and command made it.
+    provenance = {
+        "commit": _commit(),
+        "command": "python bench/bench_commission.py " + " ".join(sys.argv[1:]),
+    }
     for k, plant in enumerate(args.plants):
         results[plant] = run_one(plant, root / plant, 60 + k, args)
+        results[plant]["provenance"] = {
+            **provenance,
+            "finished_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        }
         print(table({plant: results[plant]}), flush=True)
     print("\n" + table(results))
     merged: dict[str, Any] = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
