@@ -64,3 +64,26 @@ def test_without_a_twin_nothing_is_scored_against_one(bench: ModuleType) -> None
     (scored,) = bench.with_twins(rows)
     assert scored["twin_final_deg"] is None
     assert scored["matters"] is None and scored["within_twin"] is None
+
+
+def test_an_outside_effect_is_held_to_unexplained_only_where_it_matters(
+    bench: ModuleType,
+) -> None:
+    rows = [
+        _row("nothing", (), 0.066, 0.066, no_effect_named=True),
+        # A backlash the twin barely beats (seed 1010's Maxwell-slip: 0.075 against 0.066):
+        # 'adequate' is right there, and it is not counted against the lab.
+        _row("outside", ("backlash",), 0.075, 0.075, unexplained_not_misnamed=False),
+        _row("outside", ("gain_drift",), 1.116, 1.116, unexplained_not_misnamed=True),
+        _row("outside", ("slow_lag",), 0.43, 0.92, unexplained_not_misnamed=False),
+    ]
+    scored = {tuple(r["hidden"]): r for r in bench.with_twins(rows)}
+    assert scored[("backlash",)]["matters"] is False
+    assert scored[("backlash",)]["unexplained_where_it_matters"] is None
+    assert scored[("gain_drift",)]["unexplained_where_it_matters"] is True
+    assert scored[("slow_lag",)]["unexplained_where_it_matters"] is False
+    # Outside effects are never held to their twin: they cannot be removed by name.
+    assert scored[("gain_drift",)]["within_twin"] is None
+    text = bench.table(rows)
+    assert "| outside the catalogue: unexplained, not misnamed | >= 80 % | 1/3 (33 %) |" in text
+    assert "where it matters: unexplained, not misnamed |  | 1/2 (50 %) |" in text
