@@ -12,7 +12,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections import OrderedDict
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
@@ -23,6 +23,7 @@ from catheter_models.models.base import (
 )
 from catheter_models.models.blocks import FORMS, BlockParam
 from catheter_models.models.cores import Core, FreePI
+from catheter_models.models.cores.base import POLISH_CACHE_BYTES, _BytesLRU
 
 if TYPE_CHECKING:
     from catheter_models.models.greybox import GreyBox
@@ -223,18 +224,28 @@ class _NonlinearFitter(_Fitter):
         hi = np.concatenate([hi_c, np.full(hi_b.size, unit.HIGH)])
         v0 = np.clip(np.concatenate([core.vector(), unit.to_unit(self.pack(blocks))]), lo, hi)
         n_total = sum(x.size for x in self.xs)
+        runners = core.polish_runners(self.rate)
+        model, rate = self.model, self.rate
+        inputs = [e for e in model.effects if FORMS[e].side == "input"]
+        # Where the finite differences move an output block's parameter, the core's output
+        # is the point's own: kept, not run again (the core is most of a residual's cost).
+        core_outputs = _BytesLRU(POLISH_CACHE_BYTES)
 
         def residuals(v: FloatArray) -> FloatArray:
-            run = core.runner(v[:n_core], self.rate)
-            if run is None:
-                return np.full(n_total, 1e3)
             bl = self.unpack(unit.from_unit(v[n_core:]))
-            return np.concatenate(
-                [
-                    (self.model._run(x, self.rate, run, bl) - y) * w
-                    for x, y, w in zip(self.xs, self.ys, self.weights, strict=True)
-                ]
-            )
+            key = (v[:n_core].tobytes(), tuple(x for e in inputs for x in bl[e]))
+            out = []
+            run: Callable[[FloatArray], FloatArray] | None = None
+            for i, (x, y, w) in enumerate(zip(self.xs, self.ys, self.weights, strict=True)):
+                y_core = core_outputs.get((i, *key))
+                if y_core is None:
+                    run = run or runners(v[:n_core])
+                    if run is None:
+                        return np.full(n_total, 1e3)
+                    y_core = run(model._inputs(x, rate, bl))
+                    core_outputs.put((i, *key), y_core)
+                out.append((model._outputs(y_core, rate, bl) - y) * w)
+            return np.concatenate(out)
 
         v_best = v0
         if self.model.polish_evals > 0:

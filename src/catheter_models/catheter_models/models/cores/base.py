@@ -9,6 +9,7 @@ from __future__ import annotations
 import functools
 import math
 from abc import ABC, abstractmethod
+from collections import OrderedDict
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any, ClassVar, Final, ParamSpec, TypeVar
 
@@ -54,6 +55,48 @@ def one_blas_thread(func: Callable[P, R]) -> Callable[P, R]:
             return func(*args, **kwargs)
 
     return wrapper
+
+
+POLISH_CACHE_BYTES: Final = 96 * 2**20
+"""What a joint polish may keep of outputs it will ask for again [bytes]: the point being
+differenced must outlive the coordinates differenced before the ones that reuse it (a
+Bouc-Wen core's five shape values before its five weights: six sets of columns; 3 MB a set
+for 5 minutes at 250 Hz). 0 keeps nothing: the polish as it was, for comparison
+(bench/bench_polish_cache.py)."""
+
+
+class _BytesLRU:
+    """Arrays by key, the least recently used dropped beyond a budget of bytes."""
+
+    def __init__(self, budget_bytes: int) -> None:
+        self.budget_bytes = budget_bytes
+        self._items: OrderedDict[Any, FloatArray] = OrderedDict()
+        self._bytes = 0
+
+    def get(self, key: Any) -> FloatArray | None:
+        """The array kept for ``key`` (now the most recent), or None."""
+        hit = self._items.get(key)
+        if hit is not None:
+            self._items.move_to_end(key)
+        return hit
+
+    def put(self, key: Any, value: FloatArray) -> None:
+        """Keep ``value`` (read-only from now on: callers share it); with no budget, nothing.
+
+        Beyond the budget the least recent go, but never the one just kept: a polish on hours
+        of data still reuses the point it differences.
+        """
+        if self.budget_bytes <= 0:
+            return
+        value.flags.writeable = False
+        old = self._items.pop(key, None)
+        if old is not None:
+            self._bytes -= old.nbytes
+        self._items[key] = value
+        self._bytes += value.nbytes
+        while self._bytes > self.budget_bytes and len(self._items) > 1:
+            _, dropped = self._items.popitem(last=False)
+            self._bytes -= dropped.nbytes
 
 
 def _alpha(rate_hz: float, tau_s: float = RATE_FILTER_S) -> float:
@@ -170,6 +213,17 @@ class Core(ABC):
     def set_vector(self, v: FloatArray) -> None:
         """Adopt the polished vector ``v``."""
         raise NotImplementedError
+
+    def polish_runners(
+        self, rate_hz: float
+    ) -> Callable[[FloatArray], Callable[[FloatArray], FloatArray] | None]:
+        """:meth:`runner` for the many nearby vectors of one joint polish.
+
+        A polish's finite differences move one coordinate at a time; a core may keep, for
+        the polish's duration, what does not depend on the coordinate moved (the Bouc-Wen
+        state does not depend on the output weights). Outputs must equal :meth:`runner`'s.
+        """
+        return lambda v: self.runner(v, rate_hz)
 
 
 MOST_RATE_LOOP_GAIN: Final = 0.7

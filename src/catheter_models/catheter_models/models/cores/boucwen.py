@@ -15,10 +15,12 @@ from scipy import optimize
 
 from catheter_models.models.base import ModelError
 from catheter_models.models.cores.base import (
+    POLISH_CACHE_BYTES,
     Core,
     FloatArray,
     StateStep,
     _alpha,
+    _BytesLRU,
 )
 
 _BW_NAMES: Final = ("opening_bar", "knee_bar", "b", "g_over_b", "n")
@@ -205,6 +207,34 @@ class BoucWen(Core):
     def set_vector(self, v: FloatArray) -> None:
         """Adopt ``v``."""
         self.theta, self.weights = np.array(v[:5]), np.array(v[5:])
+
+    def polish_runners(
+        self, rate_hz: float
+    ) -> Callable[[FloatArray], Callable[[FloatArray], FloatArray] | None]:
+        """:meth:`runner`, with the Bouc-Wen columns kept for a shape and an input.
+
+        Half of the polished vector is the output weights, and so are half of the finite
+        differences: for those (and for an output block's parameters) the shape and the
+        input are the ones of the point differenced, and the kernel, nearly all of the cost,
+        need not run again. Kept by recency within :data:`POLISH_CACHE_BYTES`.
+        """
+        if POLISH_CACHE_BYTES <= 0:
+            return super().polish_runners(rate_hz)
+        cache = _BytesLRU(POLISH_CACHE_BYTES)
+
+        def columns(x: FloatArray, theta: FloatArray) -> FloatArray:
+            key = (theta.tobytes(), rate_hz, np.ascontiguousarray(x, dtype=np.float64).tobytes())
+            hit = cache.get(key)
+            if hit is None:
+                hit = self.columns(x, rate_hz, theta)
+                cache.put(key, hit)
+            return hit
+
+        def make(v: FloatArray) -> Callable[[FloatArray], FloatArray]:
+            theta, w = np.array(v[:5]), np.array(v[5:])
+            return lambda x: columns(x, theta) @ w
+
+        return make
 
     def values(self) -> dict[str, Any]:
         """Named shape and the output weights."""
