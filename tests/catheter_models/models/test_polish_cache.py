@@ -12,10 +12,14 @@ from catheter_models.models.greybox import GreyBox
 
 
 @pytest.fixture(scope="module")
-def boucwen_chain() -> tuple[GreyBox, list]:
-    recs = simulate_recordings(["model_test_arbitrary_plateaus"])
+def recordings() -> list:
+    return simulate_recordings(["model_test_arbitrary_plateaus"])
+
+
+@pytest.fixture(scope="module")
+def boucwen_chain(recordings: list) -> tuple[GreyBox, list]:
     base = GreyBox(effects=[], core="boucwen", core_settings={"starts": 1})
-    return base.fit(recs, progress=False), recs
+    return base.fit(recordings, progress=False), recordings
 
 
 def _refit(
@@ -51,6 +55,22 @@ def test_the_polish_gives_the_same_chain_with_fewer_runs_of_the_core(
     assert (blocks, core) == (blocks_0, core_0)
     # The five output weights' differences (and an output block's) reuse the point's state.
     assert runs < 0.75 * runs_0, (runs, runs_0)
+
+
+@pytest.fixture(scope="module")
+def drdpi_chain(recordings: list) -> GreyBox:
+    return GreyBox(effects=[], core="drdpi").fit(recordings, progress=False)
+
+
+@pytest.mark.parametrize("effect", ["creep", "transport_delay"])
+def test_a_drdpi_core_polishes_to_the_same_chain_on_what_was_kept(
+    drdpi_chain: GreyBox, recordings: list, monkeypatch: pytest.MonkeyPatch, effect: str
+) -> None:
+    # The DRDPI's own coordinates reuse the input blocks' output, an output block's
+    # coordinates the DRDPI's: both read-only, which its operators must take as they are.
+    base = drdpi_chain
+    blocks, core, _ = _refit(base, recordings, effect, monkeypatch, kept=True)
+    assert (blocks, core) == _refit(base, recordings, effect, monkeypatch, kept=False)[:2]
 
 
 def test_what_is_kept_is_dropped_oldest_first_beyond_its_budget() -> None:

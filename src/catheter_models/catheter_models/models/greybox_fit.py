@@ -228,22 +228,29 @@ class _NonlinearFitter(_Fitter):
         model, rate = self.model, self.rate
         inputs = [e for e in model.effects if FORMS[e].side == "input"]
         # Where the finite differences move an output block's parameter, the core's output
-        # is the point's own: kept, not run again (the core is most of a residual's cost).
+        # is the point's own: kept, not run again (the core is most of a residual's cost);
+        # where they move the core's, so are the input blocks' (a lag's fill is the rest).
         core_outputs = _BytesLRU(POLISH_CACHE_BYTES)
+        core_inputs = _BytesLRU(POLISH_CACHE_BYTES)
 
         def residuals(v: FloatArray) -> FloatArray:
             bl = self.unpack(unit.from_unit(v[n_core:]))
-            key = (v[:n_core].tobytes(), tuple(x for e in inputs for x in bl[e]))
+            at_core = v[:n_core].tobytes()
+            at_inputs = tuple(value for e in inputs for value in bl[e])
             out = []
             run: Callable[[FloatArray], FloatArray] | None = None
             for i, (x, y, w) in enumerate(zip(self.xs, self.ys, self.weights, strict=True)):
-                y_core = core_outputs.get((i, *key))
+                y_core = core_outputs.get((i, at_core, at_inputs))
                 if y_core is None:
                     run = run or runners(v[:n_core])
                     if run is None:
                         return np.full(n_total, 1e3)
-                    y_core = run(model._inputs(x, rate, bl))
-                    core_outputs.put((i, *key), y_core)
+                    x_core = core_inputs.get((i, at_inputs))
+                    if x_core is None:
+                        x_core = model._inputs(x, rate, bl)
+                        core_inputs.put((i, at_inputs), x_core)
+                    y_core = run(x_core)
+                    core_outputs.put((i, at_core, at_inputs), y_core)
                 out.append((model._outputs(y_core, rate, bl) - y) * w)
             return np.concatenate(out)
 
