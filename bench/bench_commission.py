@@ -170,8 +170,9 @@ def _commit() -> str:
             text=True,
             check=True,
         ).stdout.strip()
+        # The results this script itself merges into do not make the code dirty.
         dirty = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no"],
+            ["git", "status", "--porcelain", "--untracked-files=no", "--", ".", ":!bench/results"],
             cwd=REPO,
             capture_output=True,
             text=True,
