@@ -36,8 +36,7 @@ sys.path.insert(0, str(REPO / "tests" / "support"))
 from foreign_plants import PLANTS  # noqa: E402
 from foreign_plants.cases import draw_case  # noqa: E402
 
-from catheter_models.models import greybox_fit  # noqa: E402
-from catheter_models.models.cores import boucwen  # noqa: E402
+from catheter_models.models.cores import base as core_base  # noqa: E402
 from catheter_models.models.greybox import GreyBox  # noqa: E402
 
 EFFECTS = ("tip_dynamics", "creep", "drift", "transport_delay", "pneumatic_lag")
@@ -46,15 +45,12 @@ EFFECTS = ("tip_dynamics", "creep", "drift", "transport_delay", "pneumatic_lag")
 @contextmanager
 def nothing_kept() -> Iterator[None]:
     """The baseline: the polish as it was before it kept the core's output (no budget)."""
-    modules = (greybox_fit, boucwen)
-    budgets = [m.POLISH_CACHE_BYTES for m in modules]
-    for m in modules:
-        m.POLISH_CACHE_BYTES = 0  # type: ignore[misc]
+    budget = core_base.POLISH_CACHE_BYTES
+    core_base.POLISH_CACHE_BYTES = 0  # type: ignore[misc]
     try:
         yield
     finally:
-        for m, budget in zip(modules, budgets, strict=True):
-            m.POLISH_CACHE_BYTES = budget  # type: ignore[misc]
+        core_base.POLISH_CACHE_BYTES = budget  # type: ignore[misc]
 
 
 def refit(base: GreyBox, effect: str, train: list[Any]) -> tuple[float, dict[str, Any]]:

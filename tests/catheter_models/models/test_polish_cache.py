@@ -3,8 +3,7 @@
 import numpy as np
 import pytest
 
-from catheter_models.models import greybox_fit
-from catheter_models.models.cores import boucwen
+from catheter_models.models.cores import base as core_base
 from catheter_models.models.cores.base import _BytesLRU
 from catheter_models.models.cores.boucwen import BoucWen
 from catheter_models.models.data import simulate_recordings
@@ -36,8 +35,7 @@ def _refit(
     with monkeypatch.context() as m:
         m.setattr(BoucWen, "columns", counted)
         if not kept:  # no budget: the polish as it was
-            m.setattr(greybox_fit, "POLISH_CACHE_BYTES", 0)
-            m.setattr(boucwen, "POLISH_CACHE_BYTES", 0)
+            m.setattr(core_base, "POLISH_CACHE_BYTES", 0)
         model = base.with_effect(effect)
         model.polish_evals = 40
         model.fit(recs, progress=False)

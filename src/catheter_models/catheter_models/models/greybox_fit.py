@@ -23,7 +23,8 @@ from catheter_models.models.base import (
 )
 from catheter_models.models.blocks import FORMS, BlockParam
 from catheter_models.models.cores import Core, FreePI
-from catheter_models.models.cores.base import POLISH_CACHE_BYTES, _BytesLRU
+from catheter_models.models.cores import base as core_base
+from catheter_models.models.cores.base import _BytesLRU
 
 if TYPE_CHECKING:
     from catheter_models.models.greybox import GreyBox
@@ -230,8 +231,8 @@ class _NonlinearFitter(_Fitter):
         # Where the finite differences move an output block's parameter, the core's output
         # is the point's own: kept, not run again (the core is most of a residual's cost);
         # where they move the core's, so are the input blocks' (a lag's fill is the rest).
-        core_outputs = _BytesLRU(POLISH_CACHE_BYTES)
-        core_inputs = _BytesLRU(POLISH_CACHE_BYTES)
+        core_outputs = _BytesLRU(core_base.POLISH_CACHE_BYTES)
+        core_inputs = _BytesLRU(core_base.POLISH_CACHE_BYTES)
 
         def residuals(v: FloatArray) -> FloatArray:
             bl = self.unpack(unit.from_unit(v[n_core:]))

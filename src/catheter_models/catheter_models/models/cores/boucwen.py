@@ -14,8 +14,8 @@ from numba import njit
 from scipy import optimize
 
 from catheter_models.models.base import ModelError
+from catheter_models.models.cores import base as core_base
 from catheter_models.models.cores.base import (
-    POLISH_CACHE_BYTES,
     Core,
     FloatArray,
     StateStep,
@@ -216,11 +216,12 @@ class BoucWen(Core):
         Half of the polished vector is the output weights, and so are half of the finite
         differences: for those (and for an output block's parameters) the shape and the
         input are the ones of the point differenced, and the kernel, nearly all of the cost,
-        need not run again. Kept by recency within :data:`POLISH_CACHE_BYTES`.
+        need not run again. Kept by recency within ``core_base.POLISH_CACHE_BYTES``.
         """
-        if POLISH_CACHE_BYTES <= 0:
+        budget = core_base.POLISH_CACHE_BYTES  # read now: one switch for the whole polish
+        if budget <= 0:
             return super().polish_runners(rate_hz)
-        cache = _BytesLRU(POLISH_CACHE_BYTES)
+        cache = _BytesLRU(budget)
 
         def columns(x: FloatArray, theta: FloatArray) -> FloatArray:
             key = (theta.tobytes(), rate_hz, np.ascontiguousarray(x, dtype=np.float64).tobytes())
