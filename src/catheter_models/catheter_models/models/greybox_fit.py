@@ -18,12 +18,12 @@ from typing import TYPE_CHECKING, Any, Final
 import numpy as np
 from scipy import optimize
 
+import catheter_models.models.cores.base as core_base
 from catheter_models.models.base import (
     FloatArray,
 )
 from catheter_models.models.blocks import FORMS, BlockParam
 from catheter_models.models.cores import Core, FreePI
-from catheter_models.models.cores import base as core_base
 from catheter_models.models.cores.base import _BytesLRU
 
 if TYPE_CHECKING:

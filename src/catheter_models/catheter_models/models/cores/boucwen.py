@@ -13,8 +13,8 @@ import numpy as np
 from numba import njit
 from scipy import optimize
 
+import catheter_models.models.cores.base as core_base
 from catheter_models.models.base import ModelError
-from catheter_models.models.cores import base as core_base
 from catheter_models.models.cores.base import (
     Core,
     FloatArray,
