@@ -49,6 +49,7 @@ sys.path.insert(0, str(REPO / "tests" / "support"))
 
 from foreign_plants import PLANTS  # noqa: E402
 from foreign_plants.cases import HELD_OUT_SEED0, Case, draw_case  # noqa: E402
+from lab_chains import Blocks, chain, lag_block, true_blocks  # noqa: E402
 
 from catheter_models.feedback.chain_loop import (  # noqa: E402
     CHECK_SENSITIVITY_FACTOR,
@@ -56,8 +57,6 @@ from catheter_models.feedback.chain_loop import (  # noqa: E402
 )
 from catheter_models.feedback.law import FeedbackGains  # noqa: E402
 from catheter_models.feedback.tune import LoopModel, design, margins, plainly_stable  # noqa: E402
-from catheter_models.models.cores import make_core  # noqa: E402
-from catheter_models.models.greybox import GreyBox  # noqa: E402
 
 PLANT_NAMES: Final = ("maxwell_slip", "boucwen", "duhem")
 EFFECTS: Final = ("transport_delay", "pneumatic_lag", "tip_dynamics")
@@ -68,40 +67,13 @@ OLD_RESIDUAL_FACTOR: Final = 2.0
 OLD_RESIDUAL_ALLOWANCE: Final = 0.01
 """The rule before 2026-11-29 (git 36a54b3^): chain fit <= 2 x steps' in-sample fit + 1 %."""
 
-Blocks = dict[str, list[float]]
 TRUE: Final = "true chain"
-
-
-def chain(blocks: Blocks) -> GreyBox:
-    """A grey box holding these blocks; the loop's shape reads the blocks only."""
-    model = GreyBox(effects=list(blocks), core="free_pi")
-    model._set(make_core("free_pi"), blocks, 250.0)
-    return model
-
-
-def _lag_block(time_constant_s: float) -> list[float]:
-    # A linear fill (no flow limit, equal fill and vent): the lab's block at its plainest.
-    return [time_constant_s, 1.0, 1e8, 1.0, 0.0]
-
-
-def true_blocks(case: Case) -> Blocks:
-    """The chain of the plant's hidden effect, at the values the case drew."""
-    blocks: Blocks = {}
-    for effect in case.effects:
-        p = effect.params
-        if effect.name == "transport_delay":
-            blocks["transport_delay"] = [p["delay_s"]]
-        elif effect.name == "pneumatic_lag":
-            blocks["pneumatic_lag"] = _lag_block(p["time_constant_s"])
-        elif effect.name == "tip_dynamics":
-            blocks["tip_dynamics"] = [p["natural_frequency_hz"], p["damping_ratio"], 0.0]
-    return blocks
 
 
 WRONG: Final[dict[str, Callable[[float], Blocks]]] = {
     "delay+longer lag": lambda lag_s: {
         "transport_delay": [0.57 * lag_s],
-        "pneumatic_lag": _lag_block(1.23 * lag_s),
+        "pneumatic_lag": lag_block(1.23 * lag_s),
     },
     "all delay": lambda lag_s: {"transport_delay": [3.0 * lag_s]},
 }

@@ -9,6 +9,7 @@ import math
 import pytest
 from foreign_plants import PLANTS
 from foreign_plants.cases import draw_case
+from lab_chains import chain, lag_block, true_blocks
 
 from catheter_models.feedback.chain_loop import (
     chain_shape,
@@ -17,8 +18,6 @@ from catheter_models.feedback.chain_loop import (
     loop_from_chain,
 )
 from catheter_models.feedback.tune import design, margins, plainly_stable
-from catheter_models.models.cores import make_core
-from catheter_models.models.greybox import GreyBox
 
 
 @pytest.fixture(scope="module")
@@ -27,19 +26,12 @@ def delayed_case():
     return case, case.effects[0].params["delay_s"]
 
 
-def chain(effects: dict[str, list[float]]) -> GreyBox:
-    model = GreyBox(effects=list(effects), core="free_pi")
-    # The loop's shape reads the blocks only; the core's values do not enter it.
-    model._set(make_core("free_pi"), effects, 250.0)
-    return model
-
-
 def test_the_shape_is_the_chain_s_delay_lag_and_tip_at_the_typical_bend() -> None:
     shape = chain_shape(
         chain(
             {
                 "transport_delay": [0.04],
-                "pneumatic_lag": [0.03, 1.0, 1e8, 1.0, 0.0],
+                "pneumatic_lag": lag_block(0.03),
                 "tip_dynamics": [4.0, 0.1, 0.2],
             }
         ),
@@ -81,20 +73,6 @@ def test_a_chain_with_a_delay_where_the_catheter_has_a_lag_does_not_shape_the_lo
     assert gains.ki_pa_per_rad_s < tuned.gains.ki_pa_per_rad_s
 
 
-def _true_blocks(case) -> dict[str, list[float]]:
-    """The chain of the plant's hidden effect, at the values the case drew."""
-    blocks = {}
-    for effect in case.effects:
-        p = effect.params
-        if effect.name == "transport_delay":
-            blocks["transport_delay"] = [p["delay_s"]]
-        elif effect.name == "pneumatic_lag":
-            blocks["pneumatic_lag"] = [p["time_constant_s"], 1.0, 1e8, 1.0, 0.0]
-        elif effect.name == "tip_dynamics":
-            blocks["tip_dynamics"] = [p["natural_frequency_hz"], p["damping_ratio"], 0.0]
-    return blocks
-
-
 @pytest.mark.parametrize("plant", ["maxwell_slip", "boucwen", "duhem"])
 @pytest.mark.parametrize("effect", ["transport_delay", "pneumatic_lag", "tip_dynamics"])
 def test_with_the_plant_s_own_physics_as_the_chain_the_gains_hold_on_both_loops(
@@ -108,7 +86,7 @@ def test_with_the_plant_s_own_physics_as_the_chain_the_gains_hold_on_both_loops(
     # 1.5-5.8 times the steps' ki; the design is made on the steps there, by the fit or by
     # the check of the chain's gains on the steps' loop.
     case = draw_case(PLANTS[plant], [effect], 2)
-    tuned = design_on_chain([case.train], chain(_true_blocks(case)))
+    tuned = design_on_chain([case.train], chain(true_blocks(case)))
     assert tuned.chain_fits_steps == (tuned.chain_loop.fit_nrmse <= tuned.steps_held_out_nrmse)
     assert tuned.steps_held_out_nrmse > tuned.steps_loop.fit_nrmse
     assert tuned.record()["steps_held_out_nrmse"] == tuned.steps_held_out_nrmse
@@ -127,9 +105,7 @@ def test_a_delay_and_a_longer_lag_where_the_catheter_has_a_lag_does_not_shape_th
     # PI with a third of the crossover the steps' loop allows.
     case = draw_case(PLANTS[plant], ["pneumatic_lag"], 2)
     lag_s = case.effects[0].params["time_constant_s"]
-    wrong = chain(
-        {"transport_delay": [0.57 * lag_s], "pneumatic_lag": [1.23 * lag_s, 1.0, 1e8, 1.0, 0.0]}
-    )
+    wrong = chain({"transport_delay": [0.57 * lag_s], "pneumatic_lag": lag_block(1.23 * lag_s)})
     tuned = design_on_chain([case.train], wrong)
     assert not tuned.chain_fits_steps, (tuned.chain_loop.describe(), tuned.steps_held_out_nrmse)
     assert tuned.shape_from == "steps"
