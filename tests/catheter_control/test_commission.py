@@ -6,21 +6,29 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
+from foreign_plants import PLANTS
+from foreign_plants.cases import draw_twin_case
 from tuned_gains import sealed_gains
 
 from catheter_control import commission as cm
 from catheter_control import commission_steps as steps
 from catheter_control.commission_rig import (
+    LIVE_GRACE_S,
     Candidate,
+    LiveResponse,
     ResponseCheck,
     RigChoice,
     signal_duration_s,
 )
 from catheter_control.tracking_report import RunRecord
 from catheter_control.trajectory import TrajectoryPlan
+from catheter_models.bag import load_bag
 from catheter_models.errors import CatheterError
 from catheter_models.signals import TEST_TRAJECTORIES
+
+REPO = Path(__file__).resolve().parents[2]
 
 
 def _job(tmp_path: Path, plant: str = "", clstm_budget_s: float = 0.0) -> cm.Commission:
@@ -150,6 +158,64 @@ def test_the_response_check_names_what_does_not_move(
         assert problem in found
     else:
         assert found == ""
+
+
+def _watch(
+    command_pa: np.ndarray, measured_pa: np.ndarray, angle_rad: np.ndarray, rate_hz: float
+) -> tuple[str, float]:
+    """What the live watch says, and when [s], fed the newest samples five times a second as
+    the recording's listener takes them."""
+    live = LiveResponse()
+    every = round(rate_hz * 0.2)
+    for k in range(0, command_pa.size, every):
+        live.command_pa.append(float(command_pa[k]))
+        live.measured_pa.append(float(measured_pa[k]))
+        live.angle_rad.append(float(angle_rad[k]))
+        found = live.problem(k / rate_hz)
+        if found:
+            return found, k / rate_hz
+    return "", command_pa.size / rate_hz
+
+
+@pytest.fixture(scope="module")
+def live_recording() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The shipped training bag: the recorder's, from the simulated rig over DDS."""
+    series = load_bag(REPO / "bags" / "training").aligned(250.0)
+    return series.pressure_command_pa, series.pressure_measured_pa, series.angle_rad
+
+
+def test_the_live_watch_never_stops_a_rig_that_responds(live_recording) -> None:
+    assert _watch(*live_recording, 250.0) == ("", pytest.approx(118.6, abs=0.1))
+    # Catheters written apart from ours, each with a vented rest or a dead band of its own
+    # and an effect that delays or hides the bend's response (the valve as the command).
+    for name, effect in (
+        ("maxwell_slip", "pneumatic_lag"),
+        ("boucwen", "transport_delay"),
+        ("duhem", "tip_dynamics"),
+    ):
+        case = draw_twin_case(PLANTS[name], [effect], 3)
+        pressure = case.train.pressure_pa
+        assert _watch(pressure, pressure, case.train.angle_rad, case.train.rate_hz)[0] == "", name
+
+
+def test_the_live_watch_stops_a_frozen_laser_or_a_dead_valve_seconds_into_the_motion(
+    live_recording,
+) -> None:
+    command, measured, angle = live_recording
+    rate_hz = 250.0
+    # The first time the command has spanned a bar, and the measured pressure 1.5 bar.
+    first_bar_s = np.argmax(command - command[0] >= 1.0e5) / rate_hz
+    first_1_5_bar_s = np.argmax(measured - np.min(measured[:50]) >= 1.5e5) / rate_hz
+    frozen, at_s = _watch(command, measured, np.full_like(angle, math.radians(2.0)), rate_hz)
+    assert "the tip does not move" in frozen
+    # Not before the pressure had spanned enough to move any catheter, and not long after.
+    assert first_1_5_bar_s + LIVE_GRACE_S <= at_s <= first_1_5_bar_s + LIVE_GRACE_S + 5.0
+    noise = np.random.default_rng(3).normal(0.0, 300.0, command.size)
+    dead, at_s = _watch(command, noise, angle, rate_hz)
+    assert "the valve does not move" in dead
+    assert first_bar_s + LIVE_GRACE_S <= at_s <= first_bar_s + LIVE_GRACE_S + 5.0
+    # The whole recording is 119 s: the watch stops it within its first ten or so.
+    assert at_s < 15.0
 
 
 def test_a_recording_missing_commands_is_refused_past_its_limit() -> None:

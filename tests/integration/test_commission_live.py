@@ -8,6 +8,7 @@ trajectory keep it to a few minutes; docs/benchmarks.md has the full runs.
 from __future__ import annotations
 
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -153,6 +154,10 @@ def test_commission_stops_on_a_rig_that_does_not_respond(
     )
     assert code == EXIT_STOPPED, f"rc {code}\n{stdout[-2000:]}\n{stderr[-2000:]}"
     assert says in stderr
+    # Stopped by the live watch seconds into the motion, not after the whole excitation.
+    seen = re.search(r"seen (\d+) s into the excitation of about (\d+) s", stderr)
+    assert seen, stderr[-2000:]
+    assert int(seen[1]) < int(seen[2]) / 2, seen[0]
     assert "nothing was commissioned" in stderr
     assert not (out / MODEL_DIR).exists()
     # Nothing was fitted on the recording of a rig that does not respond.

@@ -17,12 +17,13 @@ without a bag here: a recording step's bag is all it is for.
 from __future__ import annotations
 
 import json
+import math
 import os
 import subprocess
 import sys
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -56,6 +57,9 @@ _EXCITE_START_WAIT_S = 30.0
 host can take seconds; a rig that never listens is named after this)."""
 _MOVING_PA = 1.0e3
 """A command above this has left rest [Pa] (excite's lead-in sends zeros)."""
+_TAKES_PER_SPIN = 8
+"""Callbacks a watching listener runs after each wait: the newest sample of the three streams
+it watches and the /diagnostics reports that came in (one a second from each node)."""
 _UNKNOWN = "_UNKNOWN_"
 """What rclpy names a publisher's node and namespace before their names are discovered."""
 _LOOK_S = 10.0
@@ -76,6 +80,17 @@ MIN_PRESSURE_FOLLOW = 0.2
 """The measured pressure must span at least this share of the commanded span."""
 MIN_BEND_SPAN_DEG = 1.0
 """The bend must span at least this much when the pressure spans a bar or more."""
+LIVE_VALVE_COMMAND_SPAN_BAR = 1.0
+"""The live watch judges the valve once the command has spanned this much."""
+LIVE_TIP_PRESSURE_SPAN_BAR = 1.5
+"""... and the tip once the measured pressure has spanned this much (half the range)."""
+LIVE_GRACE_S = 2.0
+"""... this long after each, so a slow tube or tip has followed."""
+LIVE_MIN_SAMPLES = 20
+"""Samples of each stream the live watch needs before it judges anything."""
+LIVE_SAMPLE_S = 0.2
+"""The live watch takes the newest sample of each stream this often: a few callbacks a
+second, where taking every sample (750 a second) would load the host the recording needs."""
 MAX_COMMANDS_LOST_SHARE = 0.05
 """Past this share of the excitation's commands missing from the recording, it is not used.
 
@@ -348,6 +363,8 @@ class CommissionRig:
         duration_s = signal_duration_s(signals)
         bar = ProgressBar(duration_s, show_progress)
         heard = RunRecord()  # the recorder's /diagnostics land here
+        response = LiveResponse()
+        not_moving = ""
         watch = RecordingWatch(
             bag_path,
             graph,
@@ -360,7 +377,7 @@ class CommissionRig:
         try:
             with (
                 excite_log.open("wb") as log,
-                _DiagnosticsListener(self.choice.namespace, heard) as listener,
+                _DiagnosticsListener(self.choice.namespace, heard, response) as listener,
             ):
                 # Discovery is pairwise: the rig's sensors may reach excite and not yet the
                 # recorder. Excited before the recorder hears them, the bag began 2.7 s into
@@ -371,12 +388,16 @@ class CommissionRig:
                 limit_s = duration_s + _EXCITE_START_WAIT_S + 30.0
                 try:
                     while proc.poll() is None:
-                        listener.spin(0.2)
+                        listener.spin(LIVE_SAMPLE_S)
                         bar.show(time.monotonic() - start)
                         self._check_alive()
                         failed = watch.check()
                         if failed:
                             break  # excite is stopped below: it ramps the pressure down
+                        not_moving = response.problem(time.monotonic())
+                        if not_moving:
+                            moving_s = time.monotonic() - start
+                            break
                         if time.monotonic() - start > limit_s:
                             raise RigError(
                                 f"excite did not finish {signals} within {limit_s:.0f} s"
@@ -395,6 +416,12 @@ class CommissionRig:
                 f"{bag_path.name}: {failed}; excite was stopped and ramped the pressure down; "
                 f"{facts['unrecorded_s']:.1f} s of the excitation went unrecorded from "
                 f"{facts['unrecorded_from']}; the step is to be run again (rerun the command)"
+            )
+        if not_moving:
+            raise RigError(
+                f"{bag_path.name}: {not_moving}; seen {moving_s:.0f} s into the excitation of "
+                f"about {duration_s:.0f} s, so excite was stopped there (it ramps the pressure "
+                "down)"
             )
         if proc.returncode != 0:
             tail = "\n".join(excite_log.read_text(errors="replace").splitlines()[-5:])
@@ -478,9 +505,12 @@ class CommissionRig:
 class _DiagnosticsListener:
     """A node that keeps the recorder's newest /diagnostics report in ``record``."""
 
-    def __init__(self, namespace: str, record: RunRecord) -> None:
+    def __init__(
+        self, namespace: str, record: RunRecord, response: LiveResponse | None = None
+    ) -> None:
         self.namespace = namespace
         self.record = record
+        self.response = response
 
     def __enter__(self) -> _DiagnosticsListener:
         import rclpy
@@ -510,15 +540,124 @@ class _DiagnosticsListener:
                     record.recorder_error = status.message if error else ""
 
         self.node.create_subscription(DiagnosticArray, DIAGNOSTICS.name, on_diag, 10)
+        if self.response is not None:
+            self._watch_streams(self.response)
         return self
+
+    def _watch_streams(self, response: LiveResponse) -> None:
+        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+        from sensor_msgs.msg import FluidPressure, JointState
+
+        from catheter_models.contract import PRESSURE_COMMAND
+        from catheter_ros.messages import angle_rad_from
+
+        # The newest sample only, best effort: it matches any publisher, and what is not
+        # taken is overwritten below Python, at no cost to the host.
+        newest = QoSProfile(
+            history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT
+        )
+        self.node.create_subscription(
+            FluidPressure,
+            PRESSURE_COMMAND.name,
+            lambda m: response.command_pa.append(float(m.fluid_pressure)),
+            newest,
+        )
+        self.node.create_subscription(
+            FluidPressure,
+            PRESSURE_MEASURED.name,
+            lambda m: response.measured_pa.append(float(m.fluid_pressure)),
+            newest,
+        )
+        self.node.create_subscription(
+            JointState,
+            TIP_ANGLE.name,
+            lambda m: response.angle_rad.append(angle_rad_from(m)),
+            newest,
+        )
 
     def spin(self, timeout_s: float) -> None:
         """Take what arrived, waiting up to ``timeout_s``."""
-        self._rclpy.spin_once(self.node, timeout_sec=timeout_s)
+        if self.response is None:
+            self._rclpy.spin_once(self.node, timeout_sec=timeout_s)
+            return
+        # With the streams watched, a wait would end at every one of their 750 samples a
+        # second: wait out the time instead, then take the newest of each (and the reports).
+        time.sleep(timeout_s)
+        for _ in range(_TAKES_PER_SPIN):
+            self._rclpy.spin_once(self.node, timeout_sec=0.0)
 
     def __exit__(self, *exc: object) -> None:
         self.node.destroy_node()
         self._context.__exit__(None, None, None)
+
+
+def unresponsive(
+    command_span_bar: float, measured_span_bar: float, bend_span_deg: float, *, judge_tip: bool
+) -> str:
+    """'' if the valve follows its command (and the tip bends, if ``judge_tip``), else what not.
+
+    One judgement for the whole recording afterwards and for the live watch during it.
+    """
+    if measured_span_bar < MIN_PRESSURE_FOLLOW * command_span_bar:
+        return (
+            f"the valve does not move: pressure/measured spans {measured_span_bar:.3f} bar "
+            f"while pressure/command spans {command_span_bar:.2f} bar (valve, supply, or "
+            "transmitter?)"
+        )
+    if judge_tip and bend_span_deg < MIN_BEND_SPAN_DEG:
+        return (
+            f"the tip does not move: tip/angle spans {bend_span_deg:.2f} deg while the "
+            f"pressure spans {measured_span_bar:.2f} bar (a frozen laser, a laser off its "
+            "marker, or a catheter that does not bend)"
+        )
+    return ""
+
+
+def _span(values: Sequence[float] | np.ndarray) -> float:
+    """5th to 95th percentile: a spike or a glitch does not count as motion."""
+    low, high = np.percentile(np.asarray(values, dtype=float), [5.0, 95.0])
+    return float(high - low)
+
+
+@dataclass
+class LiveResponse:
+    """The rig's response while a recording runs, from a sample of the streams it hears.
+
+    The recording is checked whole afterwards (:func:`check_response`); this watch stops a
+    rig that does not respond seconds into the motion instead of after the whole excitation
+    (minutes in the full protocol), while the pressure is still low. It judges as the check
+    does, with the same bounds, but only once the motion leaves no doubt: the valve once the
+    command has spanned :data:`LIVE_VALVE_COMMAND_SPAN_BAR`, the tip once the measured
+    pressure has spanned :data:`LIVE_TIP_PRESSURE_SPAN_BAR` (a muscle's dead band keeps a
+    working tip still over the first bar or so), each :data:`LIVE_GRACE_S` later (a long
+    tube's lag, the tip's own).
+    """
+
+    command_pa: list[float] = field(default_factory=list)
+    measured_pa: list[float] = field(default_factory=list)
+    angle_rad: list[float] = field(default_factory=list)
+    _valve_from_s: float | None = None
+    _tip_from_s: float | None = None
+
+    def problem(self, now_s: float) -> str:
+        """'' while the rig responds or it is too early to say, else what does not move."""
+        if min(len(self.command_pa), len(self.measured_pa), len(self.angle_rad)) < (
+            LIVE_MIN_SAMPLES
+        ):
+            return ""
+        command_bar = _span(self.command_pa) / 1e5
+        measured_bar = _span(self.measured_pa) / 1e5
+        if self._valve_from_s is None and command_bar >= LIVE_VALVE_COMMAND_SPAN_BAR:
+            self._valve_from_s = now_s
+        if self._tip_from_s is None and measured_bar >= LIVE_TIP_PRESSURE_SPAN_BAR:
+            self._tip_from_s = now_s
+        valve = self._valve_from_s is not None and now_s - self._valve_from_s >= LIVE_GRACE_S
+        tip = self._tip_from_s is not None and now_s - self._tip_from_s >= LIVE_GRACE_S
+        if not valve:
+            return ""
+        return unresponsive(
+            command_bar, measured_bar, math.degrees(_span(self.angle_rad)), judge_tip=tip
+        )
 
 
 @dataclass(frozen=True)
@@ -566,19 +705,13 @@ class ResponseCheck:
                 f"{self.bag}: the command spans only {self.command_span_bar:.2f} bar; the "
                 "excitation did not reach the valve"
             )
-        if self.measured_span_bar < MIN_PRESSURE_FOLLOW * self.command_span_bar:
-            return (
-                f"{self.bag}: the valve does not move: pressure/measured spans "
-                f"{self.measured_span_bar:.3f} bar while pressure/command spans "
-                f"{self.command_span_bar:.2f} bar (valve, supply, or transmitter?)"
-            )
-        if self.command_span_bar >= 1.0 and self.bend_span_deg < MIN_BEND_SPAN_DEG:
-            return (
-                f"{self.bag}: the tip does not move: tip/angle spans {self.bend_span_deg:.2f} "
-                f"deg while the pressure spans {self.measured_span_bar:.2f} bar (a frozen "
-                "laser, a laser off its marker, or a catheter that does not bend)"
-            )
-        return ""
+        judged = unresponsive(
+            self.command_span_bar,
+            self.measured_span_bar,
+            self.bend_span_deg,
+            judge_tip=self.command_span_bar >= 1.0,
+        )
+        return f"{self.bag}: {judged}" if judged else ""
 
     def to_dict(self) -> dict[str, object]:
         """For commission.json and the report."""
@@ -606,10 +739,6 @@ def check_response(bag_path: Path) -> ResponseCheck:
     span_s = float(stamps_s[-1] - stamps_s[0]) if stamps_s.size else -1.0 / CONTROL_RATE_HZ
     expected = round(span_s * CONTROL_RATE_HZ) + 1
 
-    def span(values: np.ndarray) -> float:
-        low, high = np.percentile(values, [5.0, 95.0])
-        return float(high - low)
-
     # When the excitation left zero, and whether every sensor was heard by then.
     moving = np.flatnonzero(np.asarray(bag.pressure_command.values) > _MOVING_PA)
     excited_s = float(stamps_s[moving[0]]) if moving.size else float("inf")
@@ -624,9 +753,9 @@ def check_response(bag_path: Path) -> ResponseCheck:
 
     return ResponseCheck(
         bag=bag_path.name,
-        command_span_bar=span(np.asarray(series.pressure_command_pa)) / 1e5,
-        measured_span_bar=span(np.asarray(series.pressure_measured_pa)) / 1e5,
-        bend_span_deg=float(np.degrees(span(np.asarray(series.angle_rad)))),
+        command_span_bar=_span(series.pressure_command_pa) / 1e5,
+        measured_span_bar=_span(series.pressure_measured_pa) / 1e5,
+        bend_span_deg=math.degrees(_span(series.angle_rad)),
         duration_s=float(series.t_s[-1] - series.t_s[0]),
         samples=int(series.t_s.size),
         commands_expected=expected,
