@@ -117,6 +117,7 @@ def _wait_ready(probe: Probe, pub: object, diags: list[Stamped], children: Child
     assert ready, f"graph not up:\n{children.all_logs()}"
 
 
+@pytest.mark.timeout(900)  # 45-80 s idle; minutes beside two busy loops
 def test_follows_the_thesis_trajectories_with_the_shipped_c_lstm(
     children: Children, tmp_path: Path
 ) -> None:

@@ -76,6 +76,7 @@ def _errors_deg(run_dir: Path) -> tuple[float, float]:
     return float(np.sqrt(np.mean(error**2))), float(np.sqrt(np.mean(band**2)))
 
 
+@pytest.mark.timeout(900)  # 45-80 s idle; minutes beside two busy loops
 def test_shaping_stops_the_tip_ringing_on_the_live_graph(
     children: Children, tmp_path: Path
 ) -> None:

@@ -343,6 +343,7 @@ def test_driver_refuses_out_of_range_parameter_with_exit_2(
     assert "Traceback" not in output, output
 
 
+@pytest.mark.timeout(900)  # 45-80 s idle; minutes beside two busy loops
 def test_drivers_match_sim_hardware(rig: RigProcess, children: Children, tmp_path: Path) -> None:
     # One graph after the other: both at once (on two domains) would take 20 s less, but on
     # this 2-core machine the emulated graph alone keeps one core busy (recorder, drivers and

@@ -74,6 +74,7 @@ def _fit(recording: Recording) -> DRDPI:
     return model
 
 
+@pytest.mark.timeout(900)  # 45-80 s idle; minutes beside two busy loops
 def test_a_live_graph_bag_tunes_and_trains_like_a_simulated_one(
     children: Children, tmp_path: Path
 ) -> None:

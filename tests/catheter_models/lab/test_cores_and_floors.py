@@ -390,6 +390,7 @@ def test_a_drift_block_is_named_for_an_offset_drift_not_for_a_gain_drift(
         assert "helps least where drift shows (vented" in result.text()
 
 
+@pytest.mark.timeout(900)  # 45-80 s idle; minutes beside two busy loops
 @pytest.mark.slow
 @pytest.mark.parametrize(
     ("plant", "hidden", "seed", "answer"),
@@ -427,6 +428,7 @@ def test_a_lag_is_named_pneumatic_only_where_it_is_before_the_core(
         assert lag.caveats and f"    but: {uncertain}" in text  # beside the verdict itself
 
 
+@pytest.mark.timeout(900)  # 45-80 s idle; minutes beside two busy loops
 @pytest.mark.slow
 def test_a_lag_whose_speed_follows_the_pressure_and_direction_is_removed_to_its_twin() -> None:
     # Development seed 5 (issue 34, item 4). The Bouc-Wen plant fills its muscle through a

@@ -90,6 +90,7 @@ def test_two_hidden_effects_are_both_in_the_top_three() -> None:
     assert all(c.significant for c in result.candidates[:2])
 
 
+@pytest.mark.timeout(900)  # 45-80 s idle; minutes beside two busy loops
 def test_nothing_hidden_names_no_effect_and_calls_the_drdpi_law_the_miss() -> None:
     train, test = _data(PlantConfig.thesis_rig(seed=1))
     model = GreyBox().fit(train, progress=False)

@@ -38,6 +38,7 @@ def _recording(seed: int, duration_s: float) -> Recording:
     )
 
 
+@pytest.mark.timeout(900)  # 45-80 s idle; minutes beside two busy loops
 @pytest.mark.slow
 def test_it_learns_what_the_filter_bank_cannot_and_is_chosen_as_the_stronger(
     monkeypatch: pytest.MonkeyPatch,
