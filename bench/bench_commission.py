@@ -42,6 +42,7 @@ SUPPORT = REPO / "tests" / "support"
 sys.path.insert(0, str(SUPPORT))
 
 from foreign_plants import pythonpath_with_support  # noqa: E402
+from provenance import commit  # noqa: E402
 
 RESULTS = REPO / "bench" / "results" / "commission.json"
 TARGET_RMSE_DEG = 0.3
@@ -160,29 +161,6 @@ def _steps(out: Path) -> dict[str, Any]:
     return dict(json.loads(state.read_text()).get("steps", {})) if state.exists() else {}
 
 
-def _commit() -> str:
-    """The checked-out commit, with ``+dirty`` for uncommitted changes ('' outside git)."""
-    try:
-        head = subprocess.run(
-            ["git", "rev-parse", "--short=12", "HEAD"],
-            cwd=REPO,
-            capture_output=True,
-            text=True,
-            check=True,
-        ).stdout.strip()
-        # The results this script itself merges into do not make the code dirty.
-        dirty = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no", "--", ".", ":!bench/results"],
-            cwd=REPO,
-            capture_output=True,
-            text=True,
-            check=True,
-        ).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return ""
-    return head + ("+dirty" if dirty else "")
-
-
 def table(results: dict[str, dict[str, Any]]) -> str:
     """Plant by plant: time, chosen, RMSE per trajectory beside the by-hand path's."""
     short = {t: t.replace("traj_", "")[:10] for t in TRAJECTORIES}
@@ -221,7 +199,7 @@ def main() -> None:
     results: dict[str, dict[str, Any]] = {}
     # The file is merged by plant over many runs: each row says which code and command made it.
     provenance = {
-        "commit": _commit(),
+        "commit": commit(),
         "command": "python bench/bench_commission.py " + " ".join(sys.argv[1:]),
     }
     for k, plant in enumerate(args.plants):
