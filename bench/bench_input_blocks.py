@@ -108,6 +108,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--core", default="free_pi")
     parser.add_argument("--out", type=Path, default=REPO / "bench/results/input_blocks.json")
     args = parser.parse_args(argv)
+    source = commit()  # now: the code the rows come from, whatever is committed meanwhile
     print(
         "| plant | seed | hidden | hidden → fitted | core alone | chain | twin "
         "| chain ÷ twin | chain's fit |"
@@ -120,7 +121,7 @@ def main(argv: list[str] | None = None) -> int:
     args.out.write_text(
         json.dumps(
             {
-                "commit": commit(),
+                "commit": source,
                 "seeds": args.seeds,
                 "within": f"{met}/{len(rows)}",
                 "rows": rows,

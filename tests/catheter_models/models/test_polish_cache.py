@@ -24,29 +24,16 @@ def boucwen_chain(recordings: list) -> tuple[GreyBox, list]:
 def _refit(
     base: GreyBox, recs: list, effect: str, monkeypatch: pytest.MonkeyPatch, *, kept: bool
 ) -> tuple[dict, dict, int]:
-    """The chain with ``effect`` refitted warm; its values and the Bouc-Wen kernel's runs.
-
-    The runs counted are the polishes' and the search's: after a new input block the core is
-    identified again behind it (``GreyBox._refit_core``), and that fit keeps nothing.
-    """
+    """The chain with ``effect`` refitted warm; its values and the Bouc-Wen kernel's runs."""
     runs = [0]
-    identifying = [False]
-    columns, fit = BoucWen.columns, BoucWen.fit
+    columns = BoucWen.columns
 
     def counted(self: BoucWen, *args: object) -> np.ndarray:
-        runs[0] += not identifying[0]
+        runs[0] += 1
         return columns(self, *args)  # type: ignore[arg-type]
-
-    def uncounted(self: BoucWen, *args: object, **kwargs: object) -> None:
-        identifying[0] = True
-        try:
-            fit(self, *args, **kwargs)  # type: ignore[arg-type]
-        finally:
-            identifying[0] = False
 
     with monkeypatch.context() as m:
         m.setattr(BoucWen, "columns", counted)
-        m.setattr(BoucWen, "fit", uncounted)
         if not kept:  # no budget: the polish as it was
             m.setattr(core_base, "POLISH_CACHE_BYTES", 0)
         model = base.with_effect(effect)

@@ -332,7 +332,7 @@ class GreyBox(Model):
             blocks.setdefault(e, self._blocks[e].defaults())
         fitter = self._fitter(core, xs, ys, rate)
         blocks, loss = fitter.search(blocks, new)
-        if any(FORMS[e].side == "input" for e in new):
+        if isinstance(fitter, _LinearFitter) and any(FORMS[e].side == "input" for e in new):
             fitter, blocks, loss = self._refit_core(fitter, blocks, loss)
         self._set(fitter.core, blocks, rate)
         extra: dict[str, Any] = {
@@ -371,6 +371,10 @@ class GreyBox(Model):
         delay the chain found the delay and still held out 0.23 deg; the core identified
         again behind that delay, 0.15 deg. Kept only where its polished training loss is
         lower, so a chain never ends worse than its search did.
+
+        For the core linear in its weights only, whose structure the search holds (its rate
+        factor but for the polish, its tension share), and where it was shown to help
+        (docs/lab_validation.md): the other cores polish their structure with the blocks.
         """
         xs, ys, rate = fitter.xs, fitter.ys, fitter.rate
         core = make_core(self.core_name, self.core_settings)
