@@ -410,27 +410,26 @@ class _LinearFitter(_Fitter):
         values = sorted({float(g[i]) for g in grid})
         template = list(grid[0])
         unit = _Unit(np.array([spec.params[i].low]), np.array([spec.params[i].high]))
+
+        def trial(value: float) -> dict[str, list[float]]:
+            return {**base, effect: [*template[:i], value, *template[i + 1 :]]}
+
+        def from_unit(u: float) -> float:
+            return float(unit.from_unit(np.array([u]))[0])
+
+        grid_u = [float(unit.to_unit(np.array([v]))[0]) for v in values]
         out: list[tuple[float, dict[str, list[float]]]] = []
         for beta in sorted(self.betas):
-
-            def at(value: float, beta: float = beta) -> float:
-                return self._score(
-                    {**base, effect: [*template[:i], value, *template[i + 1 :]]}, beta
-                )
-
-            scores = [at(v) for v in values]
-            k = int(np.argmin(scores))
-            lo, hi = values[max(k - 1, 0)], values[min(k + 1, len(values) - 1)]
-            u_lo, u_hi = (float(unit.to_unit(np.array([v]))[0]) for v in (lo, hi))
+            # The grid's own values (scored already at this factor), then between them.
+            k = int(np.argmin([self._score(trial(v), beta) for v in values]))
             found = optimize.minimize_scalar(
-                lambda u: at(float(unit.from_unit(np.array([u]))[0])),
-                bounds=(u_lo, u_hi),
+                lambda u, beta=beta: self._score(trial(from_unit(u)), beta),
+                bounds=(grid_u[max(k - 1, 0)], grid_u[min(k + 1, len(grid_u) - 1)]),
                 method="bounded",
                 options={"xatol": 2e-3, "maxiter": REFINE_EVALS},
             )
-            value = float(unit.from_unit(np.array([found.x]))[0])
-            trial = {**base, effect: [*template[:i], value, *template[i + 1 :]]}
-            out.append((self.loss(trial), trial))
+            best = trial(from_unit(float(found.x)))
+            out.append((self.loss(best), best))
         return out
 
     def _score(self, blocks: Mapping[str, Sequence[float]], beta: float) -> float:
@@ -441,8 +440,8 @@ class _LinearFitter(_Fitter):
         return self._scores[key]
 
     def loss(self, blocks: Mapping[str, Sequence[float]]) -> float:
-        # The rate factor is searched with the blocks: the core's own, or smaller ones (a lag
-        # or a delay may be what the core's rate-dependent thresholds were standing in for).
+        # The rate factor is searched with the blocks: the core's own, or none (a lag or a
+        # delay may be what the core's rate-dependent thresholds were standing in for).
         return min(self._score(blocks, b) for b in self.betas)
 
     def polish(self, blocks: dict[str, list[float]]) -> tuple[dict[str, list[float]], float]:
