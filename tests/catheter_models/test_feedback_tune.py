@@ -196,7 +196,7 @@ def test_the_cli_takes_the_loop_from_the_explained_chain_and_says_so(
     chain = GreyBox(effects=["transport_delay", "pneumatic_lag"], core="free_pi")
     chain._set(
         make_core("free_pi"),
-        {"transport_delay": [0.02], "pneumatic_lag": [0.03, 1.0, 1e8, 1.0, 0.0]},
+        {"transport_delay": [0.02], "pneumatic_lag": [0.03, 1.0, 1e8, 1.0, 0.0, 0.0, 0.0]},
         250.0,
     )
     chain.core_.weights, chain.core_.beta_s = np.zeros(chain.core_.n_columns), 0.0

@@ -27,7 +27,7 @@ def chain(blocks: Blocks) -> GreyBox:
 def lag_block(time_constant_s: float) -> list[float]:
     """The lab's pneumatic-lag block at its plainest: a linear fill, no flow limit, equal fill
     and vent."""
-    return [time_constant_s, 1.0, 1e8, 1.0, 0.0]
+    return [time_constant_s, 1.0, 1e8, 1.0, 0.0, 0.0, 0.0]
 
 
 def true_blocks(case: Case) -> Blocks:

@@ -25,7 +25,7 @@ def step(n: int = 2500, at: int = 250) -> np.ndarray:
     return x
 
 
-PLAIN_LAG = [0.1, 1.0, 1e8, 1.0, 0.0]  # no asymmetry, no flow limit, no pressure dependence
+PLAIN_LAG = [0.1, 1.0, 1e8, 1.0, 0.0, 0.0, 0.0]  # no asymmetry, flow limit, pressure dependence
 
 
 def test_lag_reaches_63_percent_after_one_time_constant() -> None:
@@ -38,7 +38,7 @@ def test_lag_reaches_63_percent_after_one_time_constant() -> None:
 def test_a_lag_whose_flow_chokes_ramps_then_relaxes() -> None:
     # 2 bar/s at most: a 1 bar step ramps for the first half second, where the plain
     # lag's own slope (1 bar / 0.1 s) is faster, then relaxes as the plain lag does.
-    y = block("pneumatic_lag").apply(step(), RATE_HZ, [0.1, 1.0, 2e5, 1.0, 0.0])
+    y = block("pneumatic_lag").apply(step(), RATE_HZ, [0.1, 1.0, 2e5, 1.0, 0.0, 0.0, 0.0])
     assert np.diff(y).max() == pytest.approx(2.0 / RATE_HZ, rel=1e-9)
     assert y[250 + 49] == pytest.approx(50 * 2.0 / RATE_HZ, rel=1e-9)  # still on the ramp
     assert y[-1] == pytest.approx(1.0, abs=1e-3)
@@ -48,20 +48,30 @@ def test_a_lag_whose_flow_chokes_ramps_then_relaxes() -> None:
 
 def test_a_lag_vents_at_its_own_time_constant() -> None:
     down = 1.0 - step()
-    y = block("pneumatic_lag").apply(down, RATE_HZ, [0.1, 2.0, 1e8, 1.0, 0.0])  # vents in 0.2 s
+    y = block("pneumatic_lag").apply(
+        down, RATE_HZ, [0.1, 2.0, 1e8, 1.0, 0.0, 0.0, 0.0]
+    )  # vents in 0.2 s
     assert y[250 + 49] == pytest.approx(math.exp(-1), abs=1e-9)
-    rise = block("pneumatic_lag").apply(step(), RATE_HZ, [0.1, 2.0, 1e8, 1.0, 0.0])
+    rise = block("pneumatic_lag").apply(step(), RATE_HZ, [0.1, 2.0, 1e8, 1.0, 0.0, 0.0, 0.0])
     assert rise[250 + 24] == pytest.approx(1 - math.exp(-1), abs=1e-9)  # fills in 0.1 s
 
 
 def test_a_lag_saved_before_venting_and_flow_limits_loads_as_the_plain_lag() -> None:
-    assert BLOCKS["pneumatic_lag"].check({"time_constant_s": 0.04}) == [0.04, 1.0, 1e8, 1.0, 0.0]
+    assert BLOCKS["pneumatic_lag"].check({"time_constant_s": 0.04}) == [
+        0.04,
+        1.0,
+        1e8,
+        1.0,
+        0.0,
+        0.0,
+        0.0,
+    ]
 
 
 def test_a_lag_vents_against_its_own_flow_limit() -> None:
     # Filling at most 4 bar/s, venting at most 2 bar/s (a smaller exhaust port): a 1 bar step
     # up ramps at 4 bar/s, the step down at 2 bar/s, each until the plain lag is slower.
-    values = [0.02, 1.0, 4e5, 0.5, 0.0]
+    values = [0.02, 1.0, 4e5, 0.5, 0.0, 0.0, 0.0]
     up = block("pneumatic_lag").apply(step(), RATE_HZ, values)
     down = block("pneumatic_lag").apply(1.0 - step(), RATE_HZ, values)
     assert np.diff(up).max() == pytest.approx(4.0 / RATE_HZ, rel=1e-9)
@@ -76,7 +86,7 @@ def test_a_lag_that_depends_on_the_pressure_is_quicker_where_its_exponent_says(
     # The same 0.1 bar step from 0.4 and from 2.4 bar gauge: the time to 63 % scales as the
     # absolute pressure to the minus exponent (the reference, 1.5 bar, takes 0.1 s).
     lag = block("pneumatic_lag")
-    values = [0.1, 1.0, 1e8, 1.0, exponent]
+    values = [0.1, 1.0, 1e8, 1.0, exponent, 0.0, 0.0]
 
     def time_to_63_percent_s(base_bar: float) -> float:
         y = lag.apply(base_bar + 0.1 * step(), RATE_HZ, values)
@@ -85,6 +95,62 @@ def test_a_lag_that_depends_on_the_pressure_is_quicker_where_its_exponent_says(
     low, high = time_to_63_percent_s(0.4), time_to_63_percent_s(2.4)
     expected = ((2.4 + 1.01325) / (0.4 + 1.01325)) ** exponent
     assert low / high == pytest.approx(expected, rel=0.1)
+
+
+def test_a_gradual_flow_limit_bends_the_fill_before_the_limit_and_never_passes_it() -> None:
+    # 2 bar/s at most, a 1 bar step: a hard limit ramps at exactly 2 bar/s; with a knee the
+    # flow bends towards that limit (never reaching it) and a small step, far below the
+    # limit, fills almost as the plain lag does.
+    lag = block("pneumatic_lag")
+    hard = lag.apply(step(), RATE_HZ, [0.1, 1.0, 2e5, 1.0, 0.0, 0.0, 0.0])
+    for knee in (0.5, 1.0):
+        values = [0.1, 1.0, 2e5, 1.0, 0.0, knee, 0.0]
+        y = lag.apply(step(), RATE_HZ, values)
+        assert np.diff(y).max() < 2.0 / RATE_HZ
+        assert np.all(y <= hard + 1e-12)  # slower than the hard limit everywhere
+        assert y[-1] == pytest.approx(1.0, abs=1e-2)
+        small = lag.apply(0.01 * step(), RATE_HZ, values)
+        plain = lag.apply(0.01 * step(), RATE_HZ, PLAIN_LAG)
+        assert small[250 + 24] == pytest.approx(plain[250 + 24], rel=0.06)
+    # The more gradual the knee, the slower the large step's first half second.
+    halfway = [
+        lag.apply(step(), RATE_HZ, [0.1, 1.0, 2e5, 1.0, 0.0, k, 0.0])[375] for k in (0, 1, 3)
+    ]
+    assert halfway[0] > halfway[1] > halfway[2]
+
+
+def test_a_flow_limit_with_an_upstream_share_grows_with_the_pressure_pushing_the_air() -> None:
+    # The same 1 bar step, choked at 2 bar/s at the reference (1.5 bar gauge): filling from
+    # 0 to 1 bar, the valve pushes at 1 bar gauge; from 1.5 to 2.5 bar at 2.5. With the
+    # whole limit upstream, the ramps' slopes are in the ratio of those absolute pressures;
+    # venting, the muscle pushes, so a vent from 2.5 is as quick as the fill to it.
+    lag = block("pneumatic_lag")
+    values = [0.1, 1.0, 2e5, 1.0, 0.0, 0.0, 1.0]
+    low = lag.apply(step(), RATE_HZ, values)
+    high = lag.apply(1.5 + step(), RATE_HZ, values)
+    vent = lag.apply(2.5 - step(), RATE_HZ, values)
+    ref = 1.5 + 1.01325
+    assert np.diff(low).max() == pytest.approx(2.0 / RATE_HZ * (1.0 + 1.01325) / ref, rel=1e-9)
+    assert np.diff(high).max() == pytest.approx(2.0 / RATE_HZ * (2.5 + 1.01325) / ref, rel=1e-9)
+    assert -np.diff(vent).min() == pytest.approx(np.diff(high).max(), rel=1e-9)
+    # At no share the limit is the reference's wherever the step is.
+    flat = [0.1, 1.0, 2e5, 1.0, 0.0, 0.0, 0.0]
+    assert np.diff(lag.apply(1.5 + step(), RATE_HZ, flat)).max() == pytest.approx(2.0 / RATE_HZ)
+
+
+def test_a_lag_whose_flow_bends_at_a_pressure_ratio_is_not_doubted_as_pinned() -> None:
+    # The new parameters' ends are each a physical law (a hard limit or the rational bend; a
+    # limit in pressure difference or one that chokes at a pressure ratio); the time
+    # constant's top is still a sign that the block stands in for something slower.
+    from catheter_models.lab.diagnose import _pinned
+
+    model = GreyBox(effects=["pneumatic_lag"], core="free_pi")
+    ends = [0.05, 1.0, 4e5, 1.0, 0.0, 1.0, 1.0]
+    model._set(make_core("free_pi"), {"pneumatic_lag": ends}, RATE_HZ)
+    assert _pinned(model, "pneumatic_lag") == []
+    slowest = [0.5, 1.0, 4e5, 1.0, 0.0, 1.0, 1.0]
+    model._set(make_core("free_pi"), {"pneumatic_lag": slowest}, RATE_HZ)
+    assert [d.split(" ")[0] for d in _pinned(model, "pneumatic_lag")] == ["time_constant_s"]
 
 
 def test_delay_shifts_by_the_delay() -> None:
@@ -244,7 +310,7 @@ def test_a_model_file_that_lists_an_effect_without_parameters_asks_for_a_refit(
 # Off-grid values (a delay of 37.3 samples, a tip between sub-steps): the stream must match.
 STREAM_VALUES = {
     "transport_delay": [0.1491],
-    "pneumatic_lag": [0.08, 1.7, 5e5, 0.6, 0.7],
+    "pneumatic_lag": [0.08, 1.7, 5e5, 0.6, 0.7, 0.0, 0.0],
     "creep": [0.3, 1.2, 6.0],
     "tip_dynamics": [6.3, 0.07, 2.0],
     "drift": [math.radians(5.0) / 60.0, 3.3],  # below its bound: the signal sees it settle

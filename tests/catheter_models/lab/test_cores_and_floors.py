@@ -352,7 +352,11 @@ def test_cores_are_paired_only_where_they_compete_beside_a_block(
     ("effect", "unlike", "like"),
     [
         ("transport_delay", [0.005], [0.03]),  # 5 ms: the valve; 30 ms: a tube's dead time
-        ("pneumatic_lag", [0.004, 1.5, 1e8, 1.0, 0.0], [0.025, 1.0, 1e8, 1.0, 0.0]),
+        (
+            "pneumatic_lag",
+            [0.004, 1.5, 1e8, 1.0, 0.0, 0.0, 0.0],
+            [0.025, 1.0, 1e8, 1.0, 0.0, 0.0, 0.0],
+        ),
         (
             "pneumatic_lag",
             [0.004, 2.0, 1e6, 1.0, 0.0],

@@ -24,7 +24,7 @@ from catheter_models.units import bar_to_pa, pa_to_bar, rad_to_deg
 RATE_HZ = 250.0
 VALUES = {
     "transport_delay": [0.0491],  # not a whole number of samples
-    "pneumatic_lag": [0.08, 1.7, 5e5, 0.6, 0.7],  # venting slower, limits, quicker when full
+    "pneumatic_lag": [0.08, 1.7, 5e5, 0.6, 0.7, 0.0, 0.0],  # venting slower, limits, quicker full
     "creep": [0.3, 1.2, 6.0],
     "tip_dynamics": [4.0, 0.07, 2.0],
     "drift": [math.radians(5.0) / 60.0, 3.3],
@@ -78,6 +78,21 @@ def test_each_block_s_inverse_gives_back_the_bend_asked_for(cores, core: str, ef
 
 
 @pytest.mark.parametrize("core", ["drdpi", "gpi"])
+@pytest.mark.parametrize(("knee", "upstream"), [(1.0, 0.0), (0.0, 1.0), (0.6, 1.0)])
+def test_a_lag_whose_flow_bends_or_follows_the_upstream_pressure_is_given_back(
+    cores, core: str, knee: float, upstream: float
+) -> None:
+    # The filling limit grows with the command itself under an upstream share: the inverse
+    # solves for the command (bisection) instead of dividing.
+    model = GreyBox(effects=["pneumatic_lag"], core=core)
+    model._set(
+        cores[core], {"pneumatic_lag": [*VALUES["pneumatic_lag"][:5], knee, upstream]}, RATE_HZ
+    )
+    wanted, got, _ = given_back(model)
+    assert rms_deg(got, wanted) < 0.02
+
+
+@pytest.mark.parametrize("core", ["drdpi", "gpi"])
 def test_the_tip_is_pulled_so_that_it_follows_without_ringing(cores, core: str) -> None:
     model = chain(cores, core, ["tip_dynamics"])
     wanted, got, inverse = given_back(model)
@@ -100,7 +115,7 @@ def test_a_delay_is_read_ahead_not_computed(cores) -> None:
 def test_a_plan_step_through_a_lag_opens_the_valve_within_its_bounds(cores) -> None:
     model = GreyBox(effects=["pneumatic_lag"], core="gpi")
     model._set(
-        cores["gpi"], {"pneumatic_lag": [0.08, 1.0, 1e8, 1.0, 0.0]}, RATE_HZ
+        cores["gpi"], {"pneumatic_lag": [0.08, 1.0, 1e8, 1.0, 0.0, 0.0, 0.0]}, RATE_HZ
     )  # no flow limit
     inverse = GreyBoxInverse(model, max_pressure_pa=2.5e5)
     level_rad = float(model.predict(np.full(500, 1.5e5))[-1])

@@ -210,8 +210,8 @@ def _pinned(model: GreyBox, effect: str) -> list[str]:
         # Zero (no delay, no share, no growth of the tip's damping) and the block's earlier,
         # simpler form (one creep lag, a lag without a flow limit) are plain answers; any
         # other end of a range means the block stands in for something else.
-        plain_low = p.low in (0.0, p.absent)
-        plain_high = p.high == p.absent
+        plain_low = p.plain_ends or p.low in (0.0, p.absent)
+        plain_high = p.plain_ends or p.high == p.absent
         if (at_high and not plain_high) or (at_low and not plain_low):
             pinned.append(f"{p.name} at the end of its range ({p.display(v)})")
     return pinned

@@ -61,6 +61,13 @@ class BlockParam:
     absent: float | None = None
     """The value a model saved before this parameter existed is loaded with (the block's
     earlier form); ``None``: a saved model must hold it."""
+    searched: bool = True
+    """Whether the identification's grid covers it; ``False``: held at ``absent`` there and
+    moved by the polish only (a refinement of a form the grid has found, whose own grid
+    would multiply every search's cost)."""
+    plain_ends: bool = False
+    """Both ends of the range are physical answers, not a sign that the block stands in for
+    something else (a share between two laws that are each a real form)."""
 
     def display(self, value: float) -> str:
         """The value as a person reads it (e.g. ms, Hz, deg/min)."""
@@ -124,6 +131,15 @@ class Block(ABC):
     def excitation_problem(self, inputs: Sequence[FloatArray], rate_hz: float) -> str:
         """Why ``inputs`` (pressure, bar) cannot identify this block ('' if they can)."""
         return ""
+
+    def refines(self, values: Sequence[float]) -> bool:
+        """Whether fitted ``values`` show what the parameters that are not ``searched`` refine.
+
+        They are held at their values while the earlier form is polished, then moved by a
+        second polish only where this says the data show it (a flow limit the fill reaches,
+        before its shape is refined). False by default: nothing to refine.
+        """
+        return False
 
     def unlike_effect(self, values: Sequence[float]) -> list[str]:
         """Why fitted ``values`` are not this effect's physics, though the block fits them.
