@@ -8,13 +8,18 @@ from everything else: it fits the ``pneumatic_lag`` block (``catheter_models.mod
 directly to the plant's **muscle pressure** (which only a simulator can give), from the valve
 command, so what remains is what the family cannot express, whatever the core does.
 
-Beside the lab's family, in the same run, two generalisations written here as candidates
-(they are not in the product), each defined by a signature rather than by the plant's law:
+Forms, in the same run:
 
-* ``smooth``: the flow saturates smoothly (``L tanh(step / L)``) instead of at a hard limit;
-* ``upstream``: the flow limit grows with the absolute pressure upstream of the valve (the
-  valve's side when filling, the muscle's when venting), as any restriction's does;
-* ``smooth+upstream``: both.
+* ``earlier``: the lab's family before it grew a flow knee and an upstream share (its five
+  parameters: filling's time constant, venting's ratio, the flow limit, venting's limit
+  ratio, the pressure exponent);
+* ``family``: the lab's family now, the seven (``flow_knee``: the flow bends gradually to its
+  limit; ``upstream_share``: the limit grows with the absolute pressure pushing the air, so
+  the flow saturates at a pressure ratio across the tube);
+* and three generalisations written here before the family grew, as candidates, each
+  defined by a signature rather than by the plant's law: ``smooth``, a limit at
+  ``L tanh(step / L)``; ``upstream``, a limit growing as a free power of the upstream
+  absolute pressure; ``smooth+upstream``, both.
 
 Each form is fitted by bounded least squares from the same grid of starts on the training
 recording and scored on the held-out one; errors are in bar and in degrees at the plant's
@@ -48,6 +53,7 @@ sys.path.insert(0, str(REPO / "tests" / "support"))
 
 from foreign_plants.cases import RATE_HZ, draw_twin_case  # noqa: E402
 from foreign_plants.maxwell_slip import MaxwellSlipPlant  # noqa: E402
+from provenance import commit  # noqa: E402
 
 from catheter_models.models.blocks import FORMS, block  # noqa: E402
 from catheter_models.models.greybox_fit import _Unit  # noqa: E402  (the polish's own box)
@@ -57,6 +63,7 @@ FloatArray = np.ndarray
 AMBIENT_BAR: Final = 1.01325
 REFERENCE_BAR: Final = 1.5
 CANDIDATES: Final = ("smooth", "upstream", "smooth+upstream")
+FORM_NAMES: Final = ("earlier", "family", *CANDIDATES)
 
 
 @njit(cache=True)
@@ -111,16 +118,24 @@ def _fit(
     return best[1]
 
 
-def _family() -> tuple[Callable[[FloatArray, FloatArray], FloatArray], _Unit, list[FloatArray]]:
-    """The lab's ``pneumatic_lag`` block, its bounds, and starts over its grid's corners."""
+def _family(
+    earlier: bool,
+) -> tuple[Callable[[FloatArray, FloatArray], FloatArray], _Unit, list[FloatArray]]:
+    """The lab's ``pneumatic_lag`` block, its bounds, and starts over its grid's corners.
+
+    ``earlier``: the block's form before the flow knee and the upstream share (both held at
+    0, their ``absent`` values), the five parameters the lab fitted until 2026-11-29.
+    """
     lag = block("pneumatic_lag")
     params = FORMS["pneumatic_lag"].params
-    box = _Unit(np.array([q.low for q in params]), np.array([q.high for q in params]))
+    free = params[:5] if earlier else params
+    box = _Unit(np.array([q.low for q in free]), np.array([q.high for q in free]))
     starts = [
-        np.array([tau, 1.0, rate, 1.0, exponent])
+        np.array([tau, 1.0, rate, 1.0, exponent, *([] if earlier else [0.5, 0.5])])
         for tau, rate, exponent in itertools.product((0.03, 0.1), (3e5, 1e6, 9.9e7), (0.0, 1.0))
     ]
-    return (lambda x, v: lag.apply(x, RATE_HZ, [float(a) for a in v])), box, starts
+    held = [float(q.absent or 0.0) for q in params[len(free) :]]
+    return (lambda x, v: lag.apply(x, RATE_HZ, [*(float(a) for a in v), *held])), box, starts
 
 
 def _candidate_form(
@@ -171,9 +186,12 @@ def run_seed(seed: int) -> dict[str, Any]:
         "deg_per_bar": deg_per_bar,
         "forms": {},
     }
-    for name in ("family", *CANDIDATES):
+    for name in FORM_NAMES:
         t0 = time.perf_counter()
-        run, box, starts = _family() if name == "family" else _candidate_form(name)
+        if name in ("earlier", "family"):
+            run, box, starts = _family(earlier=name == "earlier")
+        else:
+            run, box, starts = _candidate_form(name)
         values = _fit(run, box, starts, *data["train"])
         errors = {
             part: float(np.sqrt(np.mean((run(x, values) - p) ** 2)))
@@ -199,10 +217,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, nargs="+", default=[5, 6, 7])
     parser.add_argument("--out", type=Path, default=REPO / "bench/results/lag_family.json")
     args = parser.parse_args(argv)
+    source = commit()  # the code the rows come from, whatever is committed meanwhile
     rows = [run_seed(s) for s in args.seeds]
     summary = {
-        name: float(np.median([r["forms"][name]["test_bar"] for r in rows]))
-        for name in ("family", *CANDIDATES)
+        name: float(np.median([r["forms"][name]["test_bar"] for r in rows])) for name in FORM_NAMES
     }
     print("median held-out RMS of the muscle pressure [bar]:")
     for name, value in summary.items():
@@ -212,6 +230,7 @@ def main(argv: list[str] | None = None) -> int:
         json.dumps(
             {
                 "command": " ".join(["bench/bench_lag_family.py", *(argv or sys.argv[1:])]),
+                "commit": source,
                 "plant": "maxwell_slip",
                 "rows": rows,
                 "median_test_bar": summary,
