@@ -6,14 +6,12 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from known_laws import lab_protocol, rate_independent_law
 
-from catheter_models.lab.signals import lab_spec
 from catheter_models.models.blocks import block
-from catheter_models.models.cores import FreePI
-from catheter_models.models.data import Recording, simulate_recordings
+from catheter_models.models.data import Recording
 from catheter_models.models.evaluate import pooled_rmse
 from catheter_models.models.greybox import GreyBox
-from catheter_models.signals import SignalSpec, get_preset
 from catheter_models.units import pa_to_bar
 
 RATE_HZ = 250.0
@@ -22,19 +20,9 @@ DELAYS_S = (0.030, 0.046)
 NOISE_DEG = 0.02
 
 
-def _law() -> FreePI:
-    """A rate-independent law (no rate factor): any rate dependence in a fit is the delay's."""
-    law = FreePI()
-    rng = np.random.default_rng(11)
-    weights = np.abs(rng.normal(0.0, 1.0, law.n_columns)) * 0.15
-    weights[-1] = 0.0
-    law.load_values({"weights": list(weights), "beta_s": 0.0})
-    return law
-
-
 def _delayed(recordings: list[Recording], seed: int, delay_s: float) -> list[Recording]:
     """The law behind a ``delay_s`` dead time, with white noise on the bend."""
-    law, delay, rng = _law(), block("transport_delay"), np.random.default_rng(seed)
+    law, delay, rng = rate_independent_law(), block("transport_delay"), np.random.default_rng(seed)
     out = []
     for r in recordings:
         x_bar = delay.apply(pa_to_bar(r.pressure_pa), RATE_HZ, [delay_s])
@@ -43,22 +31,13 @@ def _delayed(recordings: list[Recording], seed: int, delay_s: float) -> list[Rec
     return out
 
 
-def _signals(*names: str) -> list[SignalSpec]:
-    specs = [lab_spec(n) or get_preset(n) for n in names]
-    return [s for s in specs if s is not None]
-
-
 Data = tuple[float, list[Recording], list[Recording]]
 """The hidden delay [s], the training and the held-out recordings."""
 
 
 def _data(delay_s: float) -> Data:
     """Training and held-out recordings of the law behind ``delay_s``."""
-    # The lab's protocol: sines, and plateaus reached by fast steps. On sines alone a delay
-    # and the rate factor are one thing (a play's threshold widened by beta times the speed
-    # lags a ramp by beta); a step's onset and a reversal tell them apart.
-    train = simulate_recordings(_signals("train_zero_f0.8", "lab_steps_7", "lab_plateaus_7"))
-    test = simulate_recordings(_signals("lab_steps_9", "model_test_up_chirp"), seed0=7)
+    train, test = lab_protocol()
     return delay_s, _delayed(train, 1, delay_s), _delayed(test, 2, delay_s)
 
 

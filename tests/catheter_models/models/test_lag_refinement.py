@@ -16,15 +16,13 @@ import numpy as np
 import pytest
 from foreign_plants.base import Effect
 from foreign_plants.maxwell_slip import MaxwellSlipPlant
+from known_laws import lab_protocol, rate_independent_law
 
-from catheter_models.lab.signals import lab_spec
 from catheter_models.models import greybox_fit
 from catheter_models.models.blocks import block
-from catheter_models.models.cores import FreePI
-from catheter_models.models.data import Recording, simulate_recordings
+from catheter_models.models.data import Recording
 from catheter_models.models.evaluate import pooled_rmse
 from catheter_models.models.greybox import GreyBox
-from catheter_models.signals import SignalSpec, get_preset
 from catheter_models.units import pa_to_bar
 
 RATE_HZ = 250.0
@@ -33,24 +31,9 @@ ORIFICE_LAG_S = 0.08
 """The Maxwell-slip plant's small-signal fill time (its range's upper half: a limit shows)."""
 
 
-def _law() -> FreePI:
-    """A rate-independent hysteresis law: what the chain's core can match exactly."""
-    law = FreePI()
-    rng = np.random.default_rng(11)
-    weights = np.abs(rng.normal(0.0, 1.0, law.n_columns)) * 0.15
-    weights[-1] = 0.0
-    law.load_values({"weights": list(weights), "beta_s": 0.0})
-    return law
-
-
-def _signals(*names: str) -> list[SignalSpec]:
-    specs = [lab_spec(n) or get_preset(n) for n in names]
-    return [s for s in specs if s is not None]
-
-
 def _behind(fill: str, recordings: list[Recording], seed: int) -> list[Recording]:
     """The law behind the muscle's fill from the valve command, noise on the bend."""
-    law, rng = _law(), np.random.default_rng(seed)
+    law, rng = rate_independent_law(), np.random.default_rng(seed)
     plant = MaxwellSlipPlant()
     out = []
     for r in recordings:
@@ -67,8 +50,7 @@ def _behind(fill: str, recordings: list[Recording], seed: int) -> list[Recording
 
 
 def _data(fill: str) -> tuple[list[Recording], list[Recording]]:
-    train = simulate_recordings(_signals("train_zero_f0.8", "lab_steps_7", "lab_plateaus_7"))
-    test = simulate_recordings(_signals("lab_steps_9", "model_test_up_chirp"), seed0=7)
+    train, test = lab_protocol()
     return _behind(fill, train, 1), _behind(fill, test, 2)
 
 
