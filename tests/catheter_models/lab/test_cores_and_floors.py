@@ -401,16 +401,19 @@ def test_a_drift_block_is_named_for_an_offset_drift_not_for_a_gain_drift(
     [
         ("maxwell_slip", "sensor_lag", 12, "withheld"),
         ("boucwen", "pneumatic_lag", 11, "named"),
-        ("boucwen", "sensor_lag", 4, "named, side not certain"),
+        ("boucwen", "sensor_lag", 4, "not counted"),
     ],
 )
 def test_a_lag_is_named_pneumatic_only_where_it_is_before_the_core(
     plant: str, hidden: str, seed: int, answer: str
 ) -> None:
     # Development seeds. A lag in the laser's filter (outside the catalogue) removes much of
-    # the same error as one in the tube; only the side of the hysteresis tells them apart,
-    # and where its rival fits about as well (Bouc-Wen, seed 4: 0.366 against 0.356 deg) the
-    # data cannot: the name stands, and the report says the side is not certain.
+    # the same error as one in the tube; only the side of the hysteresis tells them apart.
+    # Where its rival fits about as well (Bouc-Wen, seed 4: 0.366 against 0.356 deg) the data
+    # cannot, and the lab used to name the tube's lag with the side "not certain". Since the
+    # lag's flow may bend and follow the upstream pressure, the tube's lag mimics the
+    # laser's there only with its venting limit at the end of its range, so it is not
+    # counted and the answer is "unexplained": what issue 34 asks for outside the catalogue.
     case = draw_case(PLANTS[plant], [hidden], seed)
     model = GreyBox(core="free_pi").fit([case.train], progress=False)
     result = diagnose(
@@ -428,8 +431,8 @@ def test_a_lag_is_named_pneumatic_only_where_it_is_before_the_core(
     elif answer == "named":
         assert result.verdict == "add pneumatic_lag" and uncertain not in text
     else:
-        assert result.verdict == "add pneumatic_lag"
-        assert lag.caveats and f"    but: {uncertain}" in text  # beside the verdict itself
+        assert result.verdict == "unexplained"
+        assert "not counted: vent_rate_ratio at the end of its range" in text
 
 
 @pytest.mark.timeout(900)  # 45-80 s idle; minutes beside two busy loops
