@@ -451,6 +451,14 @@ def test_the_recorder_counts_and_says_what_it_could_not_keep(
             lambda: recorder_values(probe).get(f"lost {angle_topic}") == "22", 10.0
         )
         assert said, recorder_values(probe)
+        # The hole is seen when the first sample after it arrives; the rest of the burst may
+        # still be on its way. Stopping before the last sample arrived would lose it unseen (no
+        # later stamp reveals it): a race in the test, not a loss (seen once beside busy
+        # loops and a live commissioning run: 577 of 578 in the bag, the last one missing).
+        took_all = probe.spin_until(
+            lambda: recorder_values(probe).get(f"count {angle_topic}") == str(sent), 30.0
+        )
+        assert took_all, recorder_values(probe)
         status = statuses(diags, "catheter/recorder")[-1]
         assert status.level == DiagnosticStatus.WARN
         assert f"lost 22 of {angle_topic}" in status.message, status.message
