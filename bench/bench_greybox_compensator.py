@@ -60,6 +60,7 @@ from bench_closed_loop import (  # noqa: E402
 )
 from foreign_plants import PLANTS  # noqa: E402
 from foreign_plants.cases import HELD_OUT_SEED0, RATE_HZ, Case, draw_case  # noqa: E402
+from provenance import commit  # noqa: E402
 
 from catheter_control.models import ModelCompensator, load_compensator  # noqa: E402
 from catheter_models.errors import ParameterError  # noqa: E402
@@ -318,6 +319,7 @@ def main() -> None:
     started = time.perf_counter()
     results: dict[str, Any] = {
         "command": " ".join(["bench/bench_greybox_compensator.py", *sys.argv[1:]]),
+        "commit": commit(),
         "machine": {"cpus": os.cpu_count(), "platform": platform.platform()},
         "bounds_deg": {"ff": BOUND_FF_DEG, "ff+pi": BOUND_PI_DEG},
         "clstm_per_tick": clstm_per_tick(),

@@ -236,6 +236,46 @@ def test_a_bend_out_of_reach_gets_the_nearer_bound_not_a_dip_of_the_fit() -> Non
     assert 0.4 < charged < 0.7 and bend_deg(charged) < bend_deg(0.0)
 
 
+def test_a_muscle_kept_charged_holds_one_pressure_through_a_valley_out_of_reach() -> None:
+    # A law flat at the vented end to within a few thousandths of a degree (a free-weight
+    # PI's fit: a tiny slope below its knee at 0.6 bar), with a hysteretic state that creeps
+    # as the pressure is held. Asked for a bend below its reach tick after tick, the inverse
+    # used to return the pressure whose bend came closest on its search's path, which
+    # jumped between the vented end and the knee, and a lag's inverse behind it burst the
+    # valve to its bounds at each jump. Now it holds the top of the flat stretch.
+    knee_bar = 0.6
+
+    def advance(x_bar: float, state: np.ndarray) -> float:
+        state[0] += 0.01 * (x_bar - state[0])  # a slow state the pressure drags along
+        flat = 0.8 + 0.004 * x_bar + 0.002 * state[0]
+        return flat + (8.0 * (x_bar - knee_bar) ** 2 if x_bar > knee_bar else 0.0)
+
+    def bend_deg(x_bar: float, state: np.ndarray) -> float:
+        return advance(x_bar, state.copy())
+
+    state = np.array([1.5])
+    charging = CoreInverse(state, advance, 0.0, 3.0, bound_out_of_reach=False)
+    charging.take(1.5)  # coming down from a peak
+    held = []
+    for _ in range(200):
+        x = charging.want(0.0)
+        held.append(x)
+        charging.take(x)
+    first = held[0]
+    # Where the flat stretch ends, within the slack of the least bend it gives.
+    least = min(bend_deg(x, charging._state) for x in np.linspace(0.0, 3.0, 301))
+    assert knee_bar <= first < knee_bar + 0.05
+    assert bend_deg(first, charging._state) <= least + core_base_slack() + 1e-6
+    # And held there: not one jump, tick after tick, while the state creeps.
+    assert max(held) - min(held) < 1e-9, (min(held), max(held))
+
+
+def core_base_slack() -> float:
+    from catheter_models.models.cores.base import CHARGE_SLACK_DEG
+
+    return float(CHARGE_SLACK_DEG)
+
+
 @pytest.mark.parametrize(
     ("effects", "vents"),
     [([], True), (["transport_delay"], True), (["tip_dynamics"], True), (["pneumatic_lag"], False)],

@@ -226,6 +226,14 @@ class Core(ABC):
         return lambda v: self.runner(v, rate_hz)
 
 
+CHARGE_SLACK_DEG: Final = 0.01
+"""How far above the least bend the law gives a muscle kept charged may hold it [deg]
+(:meth:`CoreInverse._charged`): a fifth of the quietest laser's noise, and enough to find
+the top of a flat stretch in a few evaluations."""
+CHARGE_GRID: Final = 13
+"""Pressures across the range on which :meth:`CoreInverse._charged` looks for the least bend
+(0.25 bar apart on a 3 bar range)."""
+
 MOST_RATE_LOOP_GAIN: Final = 0.7
 """Largest ``gain * alpha * rate`` of a law's rate term that its inverse runs as fitted.
 
@@ -251,10 +259,13 @@ class CoreInverse:
     found by the Illinois method (regula falsi that halves a stale end: it converges
     superlinearly and never leaves the bracket). A bend the law cannot reach within
     ``[low_bar, high_bar]`` gets the nearer bound (below every bend the law gives, the
-    lowest pressure; above, the highest), unless ``bound_out_of_reach`` is off; then it
-    gets the pressure whose bend came closest. Where a fit is flat at the vented end, the
-    two differ: the closest pressure is the top of the flat stretch, where the muscle is
-    charged for the next rise at no cost to the bend, as the model sees it. On a catheter
+    lowest pressure; above, the highest), unless ``bound_out_of_reach`` is off; then a bend
+    below the law's reach keeps the muscle charged (:meth:`_charged`): the highest
+    pressure whose bend is within :data:`CHARGE_SLACK_DEG` of the least the law gives,
+    held while it stays within twice the slack. Where a
+    fit is flat at the vented end, the two differ: that pressure is the top of the flat
+    stretch, where the muscle is charged for the next rise at no cost to the bend, as the
+    model sees it. On a catheter
     whose unloading goes on below where the fit flattens, that held it 0.2 deg above its
     vented rest through every valley of a plan below the rest (the ``maxwell_slip_delay``
     plant of tests/support: 0.58 bar, where it rests at 0.97 deg, vented at 0.81): there
@@ -329,7 +340,36 @@ class CoreInverse:
         # No crossing from here to either bound: every bend seen lies on the side of fx.
         if self.bound_out_of_reach:
             return lo if fx > 0.0 else hi
+        if fx > 0.0:
+            return self._charged()
         return best_x
+
+    def _charged(self) -> float:
+        """The highest pressure [bar] whose bend is within the slack of the least bend.
+
+        Not the pressure whose bend came closest during the search: in a flat stretch that
+        depends on the search's path and jumped, tick to tick, between the vented end and
+        0.7 bar (a free-weight PI fitted behind the ``maxwell_slip_lag`` plant's lag), and
+        the lag's inverse turned each jump into a burst of the valve to a bound (344-406
+        feedforward steps of over 0.5 bar on a thesis trajectory; 4-41 now). The least
+        bend is found on a grid of :data:`CHARGE_GRID` pressures (the law may dip below its
+        vented bend near the knee), then the edge above it by the Illinois method; the last
+        pressure is kept while its bend stays within twice the slack, since the edge moves a
+        little with the core's state every tick.
+        """
+        lo, hi = self.low_bar, self.high_bar
+        grid = [lo + (hi - lo) * i / (CHARGE_GRID - 1) for i in range(CHARGE_GRID)]
+        bends = [self._bend(x) for x in grid]
+        least = min(range(CHARGE_GRID), key=bends.__getitem__)
+        edge = bends[least] + CHARGE_SLACK_DEG
+        last = min(max(self._last, lo), hi)
+        if self._bend(last) <= edge + CHARGE_SLACK_DEG:
+            return last  # held: chasing an edge that moves with the state bursts the valve
+        for i in range(least + 1, CHARGE_GRID):
+            if bends[i] > edge:
+                a, b = grid[i - 1], grid[i]
+                return self._illinois(a, bends[i - 1] - edge, b, bends[i] - edge, edge)
+        return hi
 
     def _bracket(
         self, x: float, fx: float, direction: float, target_deg: float
