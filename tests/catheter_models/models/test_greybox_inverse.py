@@ -14,7 +14,7 @@ from catheter_control.models import load_compensator, resolve_compensator
 from catheter_models.errors import ParameterError
 from catheter_models.models.blocks import FORMS
 from catheter_models.models.cores import make_core
-from catheter_models.models.cores.base import CoreInverse
+from catheter_models.models.cores.base import CHARGE_SLACK_DEG, CoreInverse
 from catheter_models.models.data import simulate_recordings
 from catheter_models.models.drdpi import DRDPI
 from catheter_models.models.greybox import GreyBox
@@ -265,15 +265,9 @@ def test_a_muscle_kept_charged_holds_one_pressure_through_a_valley_out_of_reach(
     # Where the flat stretch ends, within the slack of the least bend it gives.
     least = min(bend_deg(x, charging._state) for x in np.linspace(0.0, 3.0, 301))
     assert knee_bar <= first < knee_bar + 0.05
-    assert bend_deg(first, charging._state) <= least + core_base_slack() + 1e-6
+    assert bend_deg(first, charging._state) <= least + CHARGE_SLACK_DEG + 1e-6
     # And held there: not one jump, tick after tick, while the state creeps.
     assert max(held) - min(held) < 1e-9, (min(held), max(held))
-
-
-def core_base_slack() -> float:
-    from catheter_models.models.cores.base import CHARGE_SLACK_DEG
-
-    return float(CHARGE_SLACK_DEG)
 
 
 @pytest.mark.parametrize(
