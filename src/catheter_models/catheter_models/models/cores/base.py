@@ -321,7 +321,8 @@ class CoreInverse:
         self.evaluations = 0
         lo, hi = self.low_bar, self.high_bar
         x = min(max(self._last, lo), hi)
-        fx = self._bend(x) - target_deg
+        bend_x = self._bend(x)
+        fx = bend_x - target_deg
         if abs(fx) <= self.TOLERANCE_DEG:
             return x
         # The way the bend must go first; then the other way, for a fitted law that is not
@@ -341,11 +342,14 @@ class CoreInverse:
         if self.bound_out_of_reach:
             return lo if fx > 0.0 else hi
         if fx > 0.0:
-            return self._charged()
+            return self._charged(x, bend_x)
         return best_x
 
-    def _charged(self) -> float:
+    def _charged(self, last: float, last_bend: float) -> float:
         """The highest pressure [bar] whose bend is within the slack of the least bend.
+
+        ``last`` is the last pressure (within the bounds) and ``last_bend`` its bend from
+        this state, as :meth:`want` already found them.
 
         Not the pressure whose bend came closest during the search: in a flat stretch that
         depends on the search's path and jumped, tick to tick, between the vented end and
@@ -362,8 +366,7 @@ class CoreInverse:
         bends = [self._bend(x) for x in grid]
         least = min(range(CHARGE_GRID), key=bends.__getitem__)
         edge = bends[least] + CHARGE_SLACK_DEG
-        last = min(max(self._last, lo), hi)
-        if self._bend(last) <= edge + CHARGE_SLACK_DEG:
+        if last_bend <= edge + CHARGE_SLACK_DEG:
             return last  # held: chasing an edge that moves with the state bursts the valve
         for i in range(least + 1, CHARGE_GRID):
             if bends[i] > edge:
